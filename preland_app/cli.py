@@ -1,0 +1,140 @@
+"""The `preland` command line: a thin layer over the Python API.
+
+Every user mistake ends in one line on stderr naming what is wrong and a
+non-zero exit (2 for bad input, 1 for a failed run); never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from . import __version__
+from .errors import PrelandError
+from .landing.registry import land_mode_names
+
+app = typer.Typer(
+    name="preland",
+    help="Automated precision-landing missions for multirotor drones: fly, inject faults, measure.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILED = 1
+
+
+def fail(message: str, *, code: int = EXIT_BAD_INPUT) -> typer.Exit:
+    typer.echo(f"preland: error: {message}", err=True)
+    return typer.Exit(code)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        typer.echo(f"preland {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version_callback, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """Automated precision-landing missions for multirotor drones."""
+
+
+def _format_outcome_table(data: dict) -> str:
+    def show(value, unit: str = "", digits: int = 1) -> str:
+        if value is None:
+            return "-"
+        if isinstance(value, float):
+            return f"{value:.{digits}f}{unit}"
+        return f"{value}{unit}"
+
+    rows = [
+        ("outcome", f"{data['outcome']} ({data['message']})"),
+        ("mission", data["mission"]),
+        ("land mode", data["land_mode"]),
+        ("seed", str(data["seed"])),
+        ("take-off altitude", show(data["takeoff_altitude_rel_m"], " m")),
+        ("landing error", show(data["landing_error_cm"], " cm") + f"  (from the {data['scoring_reference']})"),
+        ("offset north", show(data["offset_north_cm"], " cm")),
+        ("offset east", show(data["offset_east_cm"], " cm")),
+        ("landing time", show(data["landing_time_s"], " s")),
+        ("flight time", show(data["flight_time_s"], " s")),
+        ("touchdown speed", show(data["touchdown_speed_m_s"], " m/s", 2)),
+    ]
+    for key, value in sorted(data.get("details", {}).items()):
+        rows.append((key.replace("_", " "), show(value)))
+    width = max(len(label) for label, _ in rows)
+    return "\n".join(f"{label:<{width}}  {value}" for label, value in rows)
+
+
+@app.command()
+def fly(
+    mission_file: Path = typer.Argument(..., metavar="MISSION", help="Mission YAML file (see missions/)."),
+    land: Optional[str] = typer.Option(None, "--land", metavar="MODE",
+                                       help=f"Land mode, overriding the mission's: {', '.join(land_mode_names())}."),
+    seed: int = typer.Option(1, "--seed", help="Trial seed: same seed, same outcome."),
+    takeoff_altitude_m: Optional[float] = typer.Option(
+        None, "--takeoff-altitude-m", help="Take-off altitude above home in m, overriding the mission's."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+    events: bool = typer.Option(False, "--events", help="Include the mission's event log."),
+) -> None:
+    """Fly a mission once on the embedded simulator and print its outcome."""
+    from .config.mission import load_mission
+    from .runtime.embedded import TrialRequest, run_trial
+
+    try:
+        mission = load_mission(mission_file)
+    except PrelandError as error:
+        raise fail(str(error)) from None
+    if land is not None and land not in land_mode_names():
+        raise fail(f"--land: unknown land mode {land!r} (expected one of: {', '.join(land_mode_names())})")
+    if takeoff_altitude_m is not None and not 0.0 < takeoff_altitude_m <= 120.0:
+        raise fail(f"--takeoff-altitude-m: must be > 0 and <= 120 m, got {takeoff_altitude_m:g}")
+    if seed < 0:
+        raise fail(f"--seed: must be >= 0, got {seed}")
+
+    outcome = run_trial(TrialRequest(mission=mission, seed=seed, land_mode=land,
+                                     takeoff_altitude_rel_m=takeoff_altitude_m, record_trajectory=False))
+    data = outcome.to_dict(include_events=events)
+    if as_json:
+        typer.echo(json.dumps(data, sort_keys=True))
+    else:
+        typer.echo(_format_outcome_table(data))
+        if events:
+            typer.echo("")
+            for event in data["events"]:
+                typer.echo(f"{event['time_s']:8.2f} s  {event['kind']:<13} {event['message']}")
+    if outcome.outcome.value != "landed":
+        raise typer.Exit(EXIT_FAILED)
+
+
+@app.command("modes")
+def modes() -> None:
+    """List the land modes this version can fly."""
+    from .landing.registry import LAND_MODES
+
+    for name in land_mode_names():
+        strategy = LAND_MODES[name]()
+        doc = (type(strategy).__doc__ or "").strip().splitlines()[0]
+        typer.echo(f"{name:<10} scored from the {strategy.scoring_reference.value:<8} {doc}")
+
+
+def main() -> None:
+    """Console entry point."""
+    try:
+        app()
+    except PrelandError as error:  # anything a command did not catch itself
+        typer.echo(f"preland: error: {error}", err=True)
+        sys.exit(EXIT_FAILED)
+
+
+if __name__ == "__main__":
+    main()

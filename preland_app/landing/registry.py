@@ -1,0 +1,25 @@
+"""The land modes preland knows, by the name missions and the CLI use."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from .base import LandStrategy
+from .normal import NormalLanding
+
+LAND_MODES: dict[str, Callable[[], LandStrategy]] = {
+    "normal": NormalLanding,
+}
+
+
+def land_mode_names() -> list[str]:
+    return sorted(LAND_MODES)
+
+
+def create_land_strategy(name: str) -> LandStrategy:
+    """A fresh strategy for `name`; raises KeyError naming the known modes."""
+    try:
+        factory = LAND_MODES[name]
+    except KeyError:
+        raise KeyError(f"unknown land mode {name!r} (expected one of: {', '.join(land_mode_names())})") from None
+    return factory()

@@ -1,0 +1,179 @@
+"""The async mission runner: the thesis' scripted mission, step by step, with timeouts.
+
+Steps: set parameters; wait for a position estimate; GUIDED and arm; take off;
+record the position; fly the path's waypoints; land with the land mode. Each
+step has its own timeout (vehicle seconds) and raises a typed error. A watcher
+task checks telemetry concurrently and stops the mission if the vehicle
+disarms in flight. Whatever happens, the `MissionReport` holds what was
+reached; the caller turns it into a trial outcome.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .clock import wait_until
+from .config.mission import MissionSpec
+from .errors import CommandDenied, MissionAborted
+from .events import EventLog
+from .landing.base import LandingContext, LandingReport, LandStrategy
+from .vehicle.protocol import Vehicle
+from .vehicle.types import FlightMode, PositionNed, Telemetry
+
+POLL_PERIOD_S = 0.1
+TAKEOFF_REACHED_FRACTION = 0.95  # as DroneKit's example scripts (the thesis' tool) judge a take-off done
+
+
+@dataclass
+class MissionReport:
+    """What the mission reached. Positions are estimated, NED from home, in m."""
+
+    recorded_position_ned_m: PositionNed | None = None
+    waypoints_reached: list[PositionNed] = field(default_factory=list)
+    land_command_time_s: float | None = None
+    disarmed_time_s: float | None = None
+    landing: LandingReport | None = None
+    completed: bool = False
+
+
+class MissionRunner:
+    """Flies one mission on one vehicle with one land strategy."""
+
+    def __init__(
+        self,
+        *,
+        spec: MissionSpec,
+        vehicle: Vehicle,
+        strategy: LandStrategy,
+        events: EventLog,
+        rng: np.random.Generator,
+        takeoff_altitude_rel_m: float | None = None,
+    ) -> None:
+        self.spec = spec
+        self.vehicle = vehicle
+        self.clock = vehicle.clock
+        self.strategy = strategy
+        self.events = events
+        self.rng = rng
+        self.takeoff_altitude_rel_m = (
+            takeoff_altitude_rel_m if takeoff_altitude_rel_m is not None
+            else spec.takeoff_altitude_rel_m(strategy.name)
+        )
+        self.report = MissionReport()
+        self._airborne = False
+        self._landing = False
+
+    async def run(self) -> MissionReport:
+        """Fly the mission. Raises the first error of a step or of the watcher."""
+        steps = asyncio.ensure_future(self._steps())
+        watcher = asyncio.ensure_future(self._watch())
+        try:
+            done, _ = await asyncio.wait({steps, watcher}, return_when=asyncio.FIRST_COMPLETED)
+            if watcher in done and not steps.done():
+                steps.cancel()
+                await asyncio.gather(steps, return_exceptions=True)
+                watcher.result()  # raises what the watcher found
+            return steps.result()
+        finally:
+            for task in (steps, watcher):
+                if not task.done():
+                    task.cancel()
+            await asyncio.gather(steps, watcher, return_exceptions=True)
+
+    async def _telemetry(self) -> Telemetry:
+        return await self.vehicle.telemetry()
+
+    async def _describe(self) -> str:
+        t = await self._telemetry()
+        p = t.position_ned_m
+        return (f"mode {t.mode.name}, {t.landed_state.name}, position N {p.north_m:.2f} E {p.east_m:.2f} m, "
+                f"altitude {t.altitude_rel_m:.2f} m")
+
+    async def _watch(self) -> None:
+        """Stop the mission if the vehicle disarms while it should be flying."""
+        while True:
+            await self.clock.sleep(POLL_PERIOD_S)
+            t = await self._telemetry()
+            if self._airborne and not self._landing and not t.armed:
+                self.events.add("aborted", "vehicle disarmed in flight")
+                raise MissionAborted("vehicle disarmed in flight before landing")
+
+    async def _steps(self) -> MissionReport:
+        spec, vehicle, clock, timeouts = self.spec, self.vehicle, self.clock, self.spec.timeouts
+        report = self.report
+        for name, value in spec.params.items():
+            await vehicle.set_param(name, value)
+        if spec.params:
+            self.events.add("params", f"set {len(spec.params)} parameter(s)", **spec.params)
+
+        async def position_ok() -> bool:
+            return (await self._telemetry()).position_ok
+
+        await wait_until(position_ok, clock=clock, timeout_s=timeouts.position_fix_s, operation="wait for position",
+                         poll_period_s=POLL_PERIOD_S, describe=self._describe)
+        await vehicle.set_mode(FlightMode.GUIDED)
+        await self._arm()
+        self.events.add("armed", "armed in GUIDED")
+
+        target_alt = self.takeoff_altitude_rel_m
+        await vehicle.takeoff(altitude_rel_m=target_alt)
+        self._airborne = True
+        self.events.add("takeoff", f"take-off to {target_alt:g} m", altitude_rel_m=target_alt)
+
+        async def at_altitude() -> bool:
+            return (await self._telemetry()).altitude_rel_m >= TAKEOFF_REACHED_FRACTION * target_alt
+
+        await wait_until(at_altitude, clock=clock, timeout_s=timeouts.takeoff_s, operation="take-off",
+                         poll_period_s=POLL_PERIOD_S, describe=self._describe)
+        recorded = (await self._telemetry()).position_ned_m
+        report.recorded_position_ned_m = recorded
+        self.events.add("recorded", "position recorded after take-off", north_m=recorded.north_m,
+                        east_m=recorded.east_m, altitude_rel_m=-recorded.down_m)
+
+        for index, (north_rel, east_rel) in enumerate(spec.path.waypoints_rel_ned_m, start=1):
+            await self._fly_to_waypoint(index, PositionNed(recorded.north_m + north_rel,
+                                                           recorded.east_m + east_rel, -target_alt))
+
+        self._landing = True
+        context = LandingContext(vehicle=vehicle, clock=clock, events=self.events, rng=self.rng,
+                                 timeout_s=timeouts.land_s, poll_period_s=POLL_PERIOD_S)
+        report.landing = await self.strategy.land(context)
+        command = self.events.first("land_command")
+        report.land_command_time_s = command.time_s if command else None
+        report.disarmed_time_s = clock.now_s()
+        report.completed = True
+        return report
+
+    async def _arm(self) -> None:
+        """Arm, retrying while the autopilot refuses (its checks may pass a moment later)."""
+        deadline_s = self.clock.now_s() + self.spec.timeouts.arm_s
+        while True:
+            try:
+                await self.vehicle.arm()
+                return
+            except CommandDenied:
+                if self.clock.now_s() >= deadline_s:
+                    raise
+                await self.clock.sleep(1.0)
+
+    async def _fly_to_waypoint(self, index: int, target: PositionNed) -> None:
+        await self.vehicle.goto_ned(position_ned_m=target)
+        radius_m = self.spec.path.acceptance_radius_m
+        reached: list[Telemetry] = []
+
+        async def arrived() -> bool:
+            t = await self._telemetry()
+            if t.position_ned_m.horizontal_distance_m(target) <= radius_m:
+                reached.append(t)
+                return True
+            return False
+
+        await wait_until(arrived, clock=self.clock, timeout_s=self.spec.timeouts.waypoint_s,
+                         operation=f"waypoint {index}", poll_period_s=POLL_PERIOD_S, describe=self._describe)
+        position = reached[-1].position_ned_m
+        self.report.waypoints_reached.append(position)
+        self.events.add("waypoint", f"waypoint {index} reached", index=index, north_m=position.north_m,
+                        east_m=position.east_m, target_north_m=target.north_m, target_east_m=target.east_m)

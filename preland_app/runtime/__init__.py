@@ -1,0 +1,1 @@
+"""Runtimes: where a trial flies (embedded simulator now; ArduPilot SITL and field over MAVLink)."""

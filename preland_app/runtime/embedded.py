@@ -1,0 +1,122 @@
+"""Run one trial on the embedded simulator, in virtual time, and score it from the simulator's truth."""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+
+from ..clock import LoopClock, run_virtual
+from ..config.mission import MissionSpec
+from ..errors import MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
+from ..events import EventLog
+from ..landing.base import ScoringReference
+from ..landing.registry import create_land_strategy
+from ..mission import MissionReport, MissionRunner
+from ..outcome import Outcome, TrialOutcome, score_touchdown
+from ..sim.noise import child_rng
+from ..sim.simulator import Simulator
+from ..vehicle.sim_backend import SimVehicle
+from .recorder import TrajectoryRecorder
+
+
+
+@dataclass(frozen=True)
+class TrialRequest:
+    """One trial: a mission, a seed, and optional overrides of its land mode and take-off altitude."""
+
+    mission: MissionSpec
+    seed: int
+    land_mode: str | None = None
+    takeoff_altitude_rel_m: float | None = None
+    record_trajectory: bool = True
+
+
+def run_trial(request: TrialRequest) -> TrialOutcome:
+    """Fly one trial on the embedded simulator (blocking; runs its own virtual-time loop)."""
+    return run_virtual(fly_embedded(request))
+
+
+async def fly_embedded(request: TrialRequest) -> TrialOutcome:
+    mission = request.mission if request.land_mode is None else request.mission.with_land_mode(request.land_mode)
+    strategy = create_land_strategy(mission.land.mode)
+    clock = LoopClock()
+    simulator = Simulator(seed=request.seed, environment=mission.environment,
+                          initial_yaw_deg=mission.initial_yaw_deg)
+    vehicle = SimVehicle(simulator=simulator, clock=clock)
+    events = EventLog(clock)
+    runner = MissionRunner(spec=mission, vehicle=vehicle, strategy=strategy, events=events,
+                           rng=child_rng(request.seed, "landing"),
+                           takeoff_altitude_rel_m=request.takeoff_altitude_rel_m)
+
+    def truth() -> tuple[float, float, float]:
+        pose = simulator.true_pose()
+        return pose.north_m, pose.east_m, -pose.down_m
+
+    recorder = TrajectoryRecorder(vehicle=vehicle, clock=clock, truth=truth)
+    outcome, message = Outcome.LANDED, Outcome.LANDED.description
+    await vehicle.connect()
+    recording = asyncio.ensure_future(recorder.run()) if request.record_trajectory else None
+    try:
+        await runner.run()
+    except WaitTimeout as error:
+        outcome, message = Outcome.TIMED_OUT, str(error)
+    except MissionAborted as error:
+        outcome, message = Outcome.ABORTED, str(error)
+    except VehicleCrashed as error:
+        outcome, message = Outcome.CRASHED, str(error)
+    except PrelandError as error:
+        outcome, message = Outcome.ERROR, f"{type(error).__name__}: {error}"
+    except Exception as error:  # a bug must still end as this trial's outcome, not kill a campaign
+        outcome, message = Outcome.ERROR, f"unexpected {type(error).__name__}: {error}"
+    finally:
+        if recording is not None:
+            recording.cancel()
+            await asyncio.gather(recording, return_exceptions=True)
+        await vehicle.close()
+    return _score(request=request, mission=mission, simulator=simulator, report=runner.report, events=events,
+                  outcome=outcome, message=message, scoring=strategy.scoring_reference,
+                  takeoff_altitude_rel_m=runner.takeoff_altitude_rel_m,
+                  trajectory=recorder.array() if request.record_trajectory else None)
+
+
+def _score(*, request: TrialRequest, mission: MissionSpec, simulator: Simulator, report: MissionReport,
+           events: EventLog, outcome: Outcome, message: str, scoring: ScoringReference,
+           takeoff_altitude_rel_m: float, trajectory) -> TrialOutcome:
+    touchdowns = simulator.touchdowns()
+    crash = next((t for t in touchdowns if t.crashed), None)
+    if crash is not None:
+        outcome = Outcome.CRASHED
+        message = (f"touched down at {crash.vertical_speed_m_s:.1f} m/s vertical speed, "
+                   f"{crash.tilt_deg:.0f} deg tilt")
+    reference = mission.pad.offset_from_start_ned_m if scoring is ScoringReference.PAD else (0.0, 0.0)
+    final = touchdowns[-1] if touchdowns and simulator.true_pose().on_ground else None
+    score = None
+    if final is not None and outcome in (Outcome.LANDED, Outcome.CRASHED):
+        score = score_touchdown(touchdown_ned_m=(final.north_m, final.east_m), reference_ned_m=reference)
+    landing_time_s = None
+    if final is not None and report.land_command_time_s is not None:
+        landing_time_s = final.time_s - report.land_command_time_s
+    armed = events.first("armed")
+    flight_time_s = None
+    if armed is not None and report.disarmed_time_s is not None:
+        flight_time_s = report.disarmed_time_s - armed.time_s
+    details = dict(report.landing.details) if report.landing else {}
+    details["wind_from_deg"] = round(simulator.wind.direction_from_deg, 1)
+    return TrialOutcome(
+        outcome=outcome,
+        message=message,
+        seed=request.seed,
+        mission=mission.name,
+        land_mode=mission.land.mode,
+        takeoff_altitude_rel_m=takeoff_altitude_rel_m,
+        scoring_reference=scoring.value,
+        landing_error_cm=score.landing_error_cm if score else None,
+        offset_north_cm=score.offset_north_cm if score else None,
+        offset_east_cm=score.offset_east_cm if score else None,
+        landing_time_s=landing_time_s,
+        flight_time_s=flight_time_s,
+        touchdown_speed_m_s=final.vertical_speed_m_s if final is not None else None,
+        details=details,
+        events=tuple(events.events),
+        trajectory=trajectory,
+    )

@@ -1,0 +1,407 @@
+"""An ArduCopter-like autopilot: flight modes, arming, take-off, position control, landing.
+
+It controls on the *estimated* state (`NavEstimate`), never the truth. Modes and
+their behaviour follow ArduCopter 4.x:
+
+* GUIDED: take-off, position targets (WPNAV_SPEED / WPNAV_ACCEL), velocity
+  targets that time out after GUID_TIMEOUT, hold;
+* LOITER: hold the stopping point;
+* LAND: hold the stopping point horizontally; descend as mode_land.cpp does
+  (sqrt-shaped approach to LAND_ALT_LOW at up to LAND_SPEED_HIGH or
+  WPNAV_SPEED_DN, then LAND_SPEED); disarm on land detection;
+* RTL: climb to RTL_ALT, return home, loiter RTL_LOIT_TIME, land.
+
+Positions inside are NED in metres from the simulation origin, in the
+estimate's frame; commands relative to home are converted on entry.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+from ..errors import CommandDenied
+from ..vehicle.types import FlightMode, LandedState, LandingTarget
+from .control import HorizontalController, VerticalController, sqrt_controller, stopping_distance_m
+from .dynamics import ActuatorDemand
+from .navigation import NavEstimate
+from .params import ParameterTable
+
+LAND_DETECTOR_TRIGGER_S = 1.0  # ArduCopter LAND_DETECTOR_TRIGGER_SEC
+LAND_DETECTOR_MAYBE_TRIGGER_S = 0.2  # LAND_DETECTOR_MAYBE_TRIGGER_SEC
+LAND_RANGEFINDER_MIN_ALT_M = 2.0  # LAND_RANGEFINDER_MIN_ALT_CM
+TAKEOFF_COMPLETE_MARGIN_M = 0.1
+_ARMABLE_MODES = (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.STABILIZE)
+
+
+class GuidedTarget(enum.Enum):
+    NONE = "none"
+    TAKEOFF = "takeoff"
+    POSITION = "position"
+    VELOCITY = "velocity"
+
+
+class RtlStage(enum.Enum):
+    CLIMB = "climb"
+    RETURN = "return"
+    LOITER = "loiter"
+    FINAL = "final"
+
+
+@dataclass(frozen=True, slots=True)
+class StatusText:
+    """A STATUSTEXT-like message from the autopilot (vehicle time in s)."""
+
+    time_s: float
+    text: str
+
+
+class Autopilot:
+    """The flight-control logic. One instance per simulated vehicle."""
+
+    def __init__(self, *, params: ParameterTable, initial_yaw_rad: float = 0.0) -> None:
+        self.params = params
+        self.mode = FlightMode.STABILIZE
+        self.armed = False
+        self.land_complete = True
+        self.home_set = False
+        self.home_north_m = 0.0
+        self.home_east_m = 0.0
+        self.home_down_m = 0.0
+        self.messages: list[StatusText] = []
+        self.landing_targets: list[tuple[float, LandingTarget]] = []
+        self.nav: NavEstimate | None = None
+        self.yaw_rad = initial_yaw_rad
+        self.yaw_target_rad = initial_yaw_rad
+        self._xy = HorizontalController()
+        self._z = VerticalController()
+        self._guided = GuidedTarget.NONE
+        self._target_north_m = 0.0
+        self._target_east_m = 0.0
+        self._target_down_m = 0.0
+        self._velocity_target = (0.0, 0.0, 0.0)
+        self._velocity_target_time_s = 0.0
+        self._yaw_rate_rad_s = 0.0
+        self._rtl_stage = RtlStage.CLIMB
+        self._rtl_stage_time_s = 0.0
+        self._rtl_alt_m = 0.0
+        self._land_detector_s = 0.0
+        self._landed_since_s = 0.0
+        self._now_s = 0.0
+        self.last_climb_demand_m_s = 0.0
+
+    # ------------------------------------------------------------------ helpers
+
+    def _say(self, text: str) -> None:
+        self.messages.append(StatusText(self._now_s, text))
+
+    def _nav(self, operation: str) -> NavEstimate:
+        if self.nav is None:
+            raise CommandDenied(operation=operation, reason="autopilot not started")
+        return self.nav
+
+    def altitude_above_home_m(self) -> float:
+        return -(self.nav.down_m - self.home_down_m) if self.nav else 0.0
+
+    def rangefinder_alt_ok(self) -> bool:
+        return self.nav is not None and self.nav.rangefinder_m is not None
+
+    def height_above_ground_m(self) -> float:
+        """Rangefinder height when in range, else altitude above home (as ArduCopter's get_alt_above_ground_cm)."""
+        if self.nav is not None and self.nav.rangefinder_m is not None:
+            return self.nav.rangefinder_m
+        return self.altitude_above_home_m()
+
+    def _stopping_point(self) -> tuple[float, float]:
+        nav = self._nav("stopping point")
+        speed = math.hypot(nav.velocity_north_m_s, nav.velocity_east_m_s)
+        if speed < 1e-3:
+            return nav.north_m, nav.east_m
+        distance = stopping_distance_m(speed, self.params.value("PSC_POSXY_P"), self.params.m_s("WPNAV_ACCEL"))
+        return (nav.north_m + nav.velocity_north_m_s / speed * distance,
+                nav.east_m + nav.velocity_east_m_s / speed * distance)
+
+    def _hold_here(self) -> None:
+        north, east = self._stopping_point()
+        self._target_north_m, self._target_east_m = north, east
+        self._target_down_m = self._nav("hold").down_m
+
+    # ------------------------------------------------------------------ commands
+
+    def arm(self) -> None:
+        nav = self._nav("arm")
+        if self.armed:
+            return
+        if self.params.value("ARMING_CHECK") != 0 and not nav.position_ok:
+            raise CommandDenied(operation="arm", reason="PreArm: Need Position Estimate")
+        if self.mode not in _ARMABLE_MODES:
+            raise CommandDenied(operation="arm", reason=f"Mode not armable: {self.mode.name}")
+        self.armed = True
+        self.land_complete = True
+        self._landed_since_s = self._now_s
+        # ArduCopter sets home where it arms.
+        self.home_north_m, self.home_east_m, self.home_down_m = nav.north_m, nav.east_m, nav.down_m
+        self.home_set = True
+        self._guided = GuidedTarget.NONE
+        self._say("Arming motors")
+
+    def disarm(self, *, force: bool = False, reason: str = "") -> None:
+        if not self.armed:
+            return
+        if not force and not self.land_complete:
+            raise CommandDenied(operation="disarm", reason="vehicle is flying (use LAND)")
+        self.armed = False
+        self._guided = GuidedTarget.NONE
+        self._say("Disarming motors" + (f": {reason}" if reason else ""))
+
+    def set_mode(self, mode: FlightMode) -> None:
+        nav = self._nav("set_mode")
+        if mode in (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.RTL, FlightMode.LAND) and not nav.position_ok:
+            raise CommandDenied(operation="set_mode", reason=f"{mode.name} requires a position estimate")
+        if mode is FlightMode.RTL and not self.home_set:
+            raise CommandDenied(operation="set_mode", reason="RTL requires home")
+        previous = self.mode
+        self.mode = mode
+        self._xy.reset(velocity_north_m_s=nav.velocity_north_m_s, velocity_east_m_s=nav.velocity_east_m_s)
+        self._z.reset(-nav.velocity_down_m_s)
+        if mode is FlightMode.GUIDED:
+            self._guided = GuidedTarget.NONE
+            self._hold_here()
+        elif mode in (FlightMode.LOITER, FlightMode.LAND):
+            self._hold_here()
+        elif mode is FlightMode.RTL:
+            self._rtl_stage = RtlStage.CLIMB
+            self._rtl_stage_time_s = self._now_s
+            self._rtl_alt_m = max(self.params.m_s("RTL_ALT") if self.params.value("RTL_ALT") > 0 else 0.0,
+                                  self.altitude_above_home_m())
+        if previous is not mode:
+            self._say(f"Mode {mode.name}")
+
+    def _require_guided(self, operation: str) -> NavEstimate:
+        nav = self._nav(operation)
+        if self.mode is not FlightMode.GUIDED:
+            raise CommandDenied(operation=operation, reason=f"requires GUIDED mode (mode is {self.mode.name})")
+        return nav
+
+    def takeoff(self, *, altitude_rel_m: float) -> None:
+        nav = self._require_guided("takeoff")
+        if not self.armed:
+            raise CommandDenied(operation="takeoff", reason="vehicle is not armed")
+        if not self.land_complete:
+            raise CommandDenied(operation="takeoff", reason="vehicle is already flying")
+        if altitude_rel_m <= 0:
+            raise CommandDenied(operation="takeoff", reason="altitude must be > 0 m")
+        self._guided = GuidedTarget.TAKEOFF
+        self._target_north_m, self._target_east_m = nav.north_m, nav.east_m
+        self._target_down_m = self.home_down_m - altitude_rel_m
+        self._xy.reset()
+        self._z.reset()
+        self._say(f"Takeoff to {altitude_rel_m:.1f} m")
+
+    def goto(self, *, north_m: float, east_m: float, down_m: float, yaw_rad: float | None) -> None:
+        """Position target, NED relative to home."""
+        self._require_guided("goto")
+        self._guided = GuidedTarget.POSITION
+        self._target_north_m = self.home_north_m + north_m
+        self._target_east_m = self.home_east_m + east_m
+        self._target_down_m = self.home_down_m + down_m
+        if yaw_rad is not None:
+            self.yaw_target_rad = yaw_rad
+
+    def set_velocity(self, *, north_m_s: float, east_m_s: float, down_m_s: float, yaw_rad: float | None,
+                     yaw_rate_rad_s: float = 0.0) -> None:
+        self._require_guided("set_velocity")
+        self._guided = GuidedTarget.VELOCITY
+        self._velocity_target = (north_m_s, east_m_s, down_m_s)
+        self._velocity_target_time_s = self._now_s
+        self._yaw_rate_rad_s = yaw_rate_rad_s
+        if yaw_rad is not None:
+            self.yaw_target_rad = yaw_rad
+
+    def hold(self) -> None:
+        self._require_guided("hold")
+        self._guided = GuidedTarget.POSITION
+        self._hold_here()
+
+    def receive_landing_target(self, target: LandingTarget) -> None:
+        """LANDING_TARGET from a companion. Kept for the precision-landing controller."""
+        self.landing_targets.append((self._now_s, target))
+        # Only the recent past matters to any estimator; keep memory bounded.
+        if len(self.landing_targets) > 512:
+            del self.landing_targets[:256]
+
+    # ------------------------------------------------------------------ state
+
+    def landed_state(self) -> LandedState:
+        if not self.armed or self.land_complete:
+            return LandedState.ON_GROUND
+        if self.mode is FlightMode.GUIDED and self._guided is GuidedTarget.TAKEOFF:
+            return LandedState.TAKING_OFF
+        if self.mode is FlightMode.LAND or (self.mode is FlightMode.RTL and self._rtl_stage is RtlStage.FINAL):
+            return LandedState.LANDING
+        return LandedState.IN_AIR
+
+    # ------------------------------------------------------------------ control loop
+
+    def step(self, *, dt_s: float, now_s: float, nav: NavEstimate, yaw_rad: float,
+             touching_ground: bool) -> ActuatorDemand:
+        """Run one control cycle on the estimate; returns the actuator demand."""
+        self._now_s = now_s
+        self.nav = nav
+        self.yaw_rad = yaw_rad
+        if not self.armed:
+            self.last_climb_demand_m_s = 0.0
+            return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
+
+        if self.land_complete:
+            demand = self._ground_idle(dt_s, nav, yaw_rad)
+        elif self.mode is FlightMode.GUIDED:
+            demand = self._run_guided(dt_s, nav)
+        elif self.mode is FlightMode.LAND:
+            demand = self._run_land(dt_s, nav, self._target_north_m, self._target_east_m)
+        elif self.mode is FlightMode.RTL:
+            demand = self._run_rtl(dt_s, nav)
+        else:  # LOITER, and STABILIZE with no pilot: hold position and altitude
+            demand = self._fly_to(dt_s, nav, self._target_north_m, self._target_east_m, self._target_down_m,
+                                  speed_max_m_s=self.params.m_s("LOIT_SPEED"))
+        self.last_climb_demand_m_s = demand.climb_rate_m_s
+        self._update_land_detector(dt_s, touching_ground, demand)
+        return demand
+
+    def _ground_idle(self, dt_s: float, nav: NavEstimate, yaw_rad: float) -> ActuatorDemand:
+        """Landed and armed: motors at idle until a take-off; auto-disarm after DISARM_DELAY."""
+        if self.mode is FlightMode.LAND or (self.mode is FlightMode.RTL):
+            self.disarm(reason="landed")
+            return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
+        if self.mode is FlightMode.GUIDED and self._guided is GuidedTarget.TAKEOFF:
+            self.land_complete = False
+            self._say("Taking off")
+            return self._run_guided(dt_s, nav)
+        delay_s = self.params.value("DISARM_DELAY")
+        if delay_s > 0 and self._now_s - self._landed_since_s >= delay_s:
+            self.disarm(reason="auto-disarm")
+            return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
+        self._xy.reset()
+        self._z.reset()
+        return ActuatorDemand(motors_armed=True, yaw_rad=yaw_rad, climb_rate_m_s=-0.5)
+
+    def _update_land_detector(self, dt_s: float, touching_ground: bool, demand: ActuatorDemand) -> None:
+        # Motors at their lower limit happens when the ground pushes back against a descent demand.
+        at_lower_limit = touching_ground and demand.climb_rate_m_s <= 0.0
+        rangefinder_check = not self.rangefinder_alt_ok() or self.height_above_ground_m() < LAND_RANGEFINDER_MIN_ALT_M
+        if at_lower_limit and rangefinder_check:
+            self._land_detector_s += dt_s
+            if self._land_detector_s >= LAND_DETECTOR_TRIGGER_S and not self.land_complete:
+                self.land_complete = True
+                self._landed_since_s = self._now_s
+                self._say("Land complete")
+        else:
+            self._land_detector_s = 0.0
+
+    def _fly_to(self, dt_s: float, nav: NavEstimate, north_m: float | None, east_m: float | None,
+                down_m: float | None, *, speed_max_m_s: float, climb_rate_m_s: float | None = None,
+                velocity_ff: tuple[float, float] = (0.0, 0.0)) -> ActuatorDemand:
+        p = self.params
+        roll, pitch = self._xy.update(
+            dt_s=dt_s,
+            yaw_rad=self.yaw_rad,
+            est_north_m=nav.north_m,
+            est_east_m=nav.east_m,
+            est_velocity_north_m_s=nav.velocity_north_m_s,
+            est_velocity_east_m_s=nav.velocity_east_m_s,
+            target_north_m=north_m,
+            target_east_m=east_m,
+            velocity_ff_north_m_s=velocity_ff[0],
+            velocity_ff_east_m_s=velocity_ff[1],
+            speed_max_m_s=speed_max_m_s,
+            accel_max_m_s2=p.m_s("WPNAV_ACCEL"),
+            pos_p=p.value("PSC_POSXY_P"),
+            vel_p=p.value("PSC_VELXY_P"),
+            vel_i=p.value("PSC_VELXY_I"),
+            vel_imax_m_s2=p.m_s("PSC_VELXY_IMAX"),
+            angle_max_rad=math.radians(p.value("ANGLE_MAX") / 100.0),
+        )
+        accel_z = p.m_s("WPNAV_ACCEL_Z")
+        if climb_rate_m_s is None:
+            climb_rate_m_s = self._z.climb_for_altitude(
+                target_alt_m=-(down_m if down_m is not None else nav.down_m),
+                est_alt_m=-nav.down_m,
+                pos_p=p.value("PSC_POSZ_P"),
+                accel_max_m_s2=accel_z,
+                speed_up_m_s=p.m_s("WPNAV_SPEED_UP"),
+                speed_down_m_s=p.m_s("WPNAV_SPEED_DN"),
+            )
+        climb = self._z.shape(dt_s=dt_s, climb_rate_m_s=climb_rate_m_s, accel_max_m_s2=accel_z)
+        return ActuatorDemand(roll_rad=roll, pitch_rad=pitch, yaw_rad=self.yaw_target_rad,
+                              climb_rate_m_s=climb, motors_armed=True)
+
+    def _run_guided(self, dt_s: float, nav: NavEstimate) -> ActuatorDemand:
+        p = self.params
+        if self._guided is GuidedTarget.TAKEOFF:
+            if -nav.down_m >= -self._target_down_m - TAKEOFF_COMPLETE_MARGIN_M:
+                self._guided = GuidedTarget.POSITION
+                self._say("Takeoff complete")
+            return self._fly_to(dt_s, nav, self._target_north_m, self._target_east_m, self._target_down_m,
+                                speed_max_m_s=p.m_s("WPNAV_SPEED"),
+                                climb_rate_m_s=self._takeoff_climb_rate(nav))
+        if self._guided is GuidedTarget.VELOCITY:
+            if self._now_s - self._velocity_target_time_s > p.value("GUID_TIMEOUT"):
+                # ArduCopter stops the vehicle when velocity commands stop arriving.
+                self._velocity_target = (0.0, 0.0, 0.0)
+            vn, ve, vd = self._velocity_target
+            self.yaw_target_rad += self._yaw_rate_rad_s * dt_s
+            return self._fly_to(dt_s, nav, None, None, None, speed_max_m_s=p.m_s("LOIT_SPEED"),
+                                climb_rate_m_s=max(-p.m_s("WPNAV_SPEED_DN"), min(p.m_s("WPNAV_SPEED_UP"), -vd)),
+                                velocity_ff=(vn, ve))
+        return self._fly_to(dt_s, nav, self._target_north_m, self._target_east_m, self._target_down_m,
+                            speed_max_m_s=p.m_s("WPNAV_SPEED"))
+
+    def _takeoff_climb_rate(self, nav: NavEstimate) -> float:
+        p = self.params
+        return self._z.climb_for_altitude(
+            target_alt_m=-self._target_down_m, est_alt_m=-nav.down_m, pos_p=p.value("PSC_POSZ_P"),
+            accel_max_m_s2=p.m_s("WPNAV_ACCEL_Z"), speed_up_m_s=p.m_s("WPNAV_SPEED_UP"),
+            speed_down_m_s=p.m_s("WPNAV_SPEED_DN"))
+
+    def land_descent_rate_m_s(self) -> float:
+        """mode_land.cpp's land_run_vertical_control, as a (negative) climb rate in m/s."""
+        p = self.params
+        land_speed = abs(p.m_s("LAND_SPEED"))
+        max_descent = p.m_s("LAND_SPEED_HIGH") if p.value("LAND_SPEED_HIGH") > 0 else p.m_s("WPNAV_SPEED_DN")
+        max_descent = max(max_descent, land_speed)  # never faster than allowed, never slower than LAND_SPEED
+        alt_low_m = max(p.m_s("LAND_ALT_LOW"), 1.0)
+        rate = sqrt_controller(alt_low_m - self.height_above_ground_m(), p.value("PSC_POSZ_P"),
+                               p.m_s("WPNAV_ACCEL_Z"))
+        return max(-max_descent, min(-land_speed, rate))
+
+    def _run_land(self, dt_s: float, nav: NavEstimate, north_m: float, east_m: float) -> ActuatorDemand:
+        return self._fly_to(dt_s, nav, north_m, east_m, None, speed_max_m_s=self.params.m_s("LOIT_SPEED"),
+                            climb_rate_m_s=self.land_descent_rate_m_s())
+
+    def _run_rtl(self, dt_s: float, nav: NavEstimate) -> ActuatorDemand:
+        p = self.params
+        home_n, home_e = self.home_north_m, self.home_east_m
+        target_down = self.home_down_m - self._rtl_alt_m
+        speed = p.m_s("RTL_SPEED") if p.value("RTL_SPEED") > 0 else p.m_s("WPNAV_SPEED")
+        stage = self._rtl_stage
+        if stage is RtlStage.CLIMB:
+            if -nav.down_m >= -target_down - 0.3:
+                self._next_rtl_stage(RtlStage.RETURN)
+            return self._fly_to(dt_s, nav, self._target_north_m, self._target_east_m, target_down,
+                                speed_max_m_s=speed)
+        if stage is RtlStage.RETURN:
+            if math.hypot(nav.north_m - home_n, nav.east_m - home_e) < 0.5:
+                self._next_rtl_stage(RtlStage.LOITER)
+            return self._fly_to(dt_s, nav, home_n, home_e, target_down, speed_max_m_s=speed)
+        if stage is RtlStage.LOITER:
+            if self._now_s - self._rtl_stage_time_s >= p.value("RTL_LOIT_TIME") / 1000.0:
+                self._next_rtl_stage(RtlStage.FINAL)
+            return self._fly_to(dt_s, nav, home_n, home_e, target_down, speed_max_m_s=speed)
+        return self._run_land(dt_s, nav, home_n, home_e)
+
+    def _next_rtl_stage(self, stage: RtlStage) -> None:
+        self._rtl_stage = stage
+        self._rtl_stage_time_s = self._now_s
+        if stage is RtlStage.FINAL:
+            self._say("RTL: landing")

@@ -1,0 +1,156 @@
+"""ArduCopter-style position control (after AC_PosControl): sqrt controller, xy and z loops.
+
+Units are SI. Positions and velocities NED from the simulation origin, as the
+autopilot *estimates* them.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .dynamics import GRAVITY_M_S2
+
+
+def sqrt_controller(error: float, p_gain: float, accel_max: float) -> float:
+    """AC_PosControl's sqrt controller: linear near zero, constant-deceleration far away.
+
+    Returns the correction rate for a position error so that the vehicle can
+    stop at `accel_max` (same units per second).
+    """
+    if accel_max <= 0.0 or p_gain <= 0.0:
+        return error * p_gain
+    linear_dist = accel_max / (p_gain * p_gain)
+    if error > linear_dist:
+        return math.sqrt(2.0 * accel_max * (error - linear_dist / 2.0))
+    if error < -linear_dist:
+        return -math.sqrt(2.0 * accel_max * (-error - linear_dist / 2.0))
+    return error * p_gain
+
+
+def stopping_distance_m(speed_m_s: float, p_gain: float, accel_max_m_s2: float) -> float:
+    """Distance to stop from `speed_m_s` under the sqrt controller (inverse of it)."""
+    if accel_max_m_s2 <= 0 or p_gain <= 0:
+        return 0.0
+    linear_velocity = accel_max_m_s2 / p_gain
+    if speed_m_s <= linear_velocity:
+        return speed_m_s / p_gain
+    return accel_max_m_s2 / (2.0 * p_gain * p_gain) + speed_m_s * speed_m_s / (2.0 * accel_max_m_s2)
+
+
+class HorizontalController:
+    """Position -> velocity (sqrt controller) -> acceleration (PI) -> lean angles."""
+
+    def __init__(self) -> None:
+        self.velocity_demand_north_m_s = 0.0
+        self.velocity_demand_east_m_s = 0.0
+        self._integrator_north = 0.0
+        self._integrator_east = 0.0
+        self.position_error_m = 0.0
+
+    def reset(self, *, velocity_north_m_s: float = 0.0, velocity_east_m_s: float = 0.0) -> None:
+        """Forget integrators and start the velocity demand from the current velocity."""
+        self.velocity_demand_north_m_s = velocity_north_m_s
+        self.velocity_demand_east_m_s = velocity_east_m_s
+        self._integrator_north = 0.0
+        self._integrator_east = 0.0
+
+    def update(
+        self,
+        *,
+        dt_s: float,
+        yaw_rad: float,
+        est_north_m: float,
+        est_east_m: float,
+        est_velocity_north_m_s: float,
+        est_velocity_east_m_s: float,
+        target_north_m: float | None,
+        target_east_m: float | None,
+        velocity_ff_north_m_s: float,
+        velocity_ff_east_m_s: float,
+        speed_max_m_s: float,
+        accel_max_m_s2: float,
+        pos_p: float,
+        vel_p: float,
+        vel_i: float,
+        vel_imax_m_s2: float,
+        angle_max_rad: float,
+    ) -> tuple[float, float]:
+        """One control step. Returns (roll_rad, pitch_rad) demands.
+
+        With a target position, the velocity demand is the sqrt controller's
+        correction plus the feed-forward; without one, it is the feed-forward
+        alone. Its change is limited to `accel_max_m_s2`.
+        """
+        want_north, want_east = velocity_ff_north_m_s, velocity_ff_east_m_s
+        if target_north_m is not None and target_east_m is not None:
+            error_north = target_north_m - est_north_m
+            error_east = target_east_m - est_east_m
+            distance = math.hypot(error_north, error_east)
+            self.position_error_m = distance
+            if distance > 1e-6:
+                correction = sqrt_controller(distance, pos_p, accel_max_m_s2)
+                want_north += correction * error_north / distance
+                want_east += correction * error_east / distance
+        else:
+            self.position_error_m = 0.0
+        speed = math.hypot(want_north, want_east)
+        if speed > speed_max_m_s > 0:
+            want_north *= speed_max_m_s / speed
+            want_east *= speed_max_m_s / speed
+        # Shape the velocity demand by the acceleration limit (as the S-curve does).
+        delta_north = want_north - self.velocity_demand_north_m_s
+        delta_east = want_east - self.velocity_demand_east_m_s
+        delta = math.hypot(delta_north, delta_east)
+        max_delta = accel_max_m_s2 * dt_s
+        if delta > max_delta > 0:
+            delta_north *= max_delta / delta
+            delta_east *= max_delta / delta
+        self.velocity_demand_north_m_s += delta_north
+        self.velocity_demand_east_m_s += delta_east
+        feedforward_north = delta_north / dt_s
+        feedforward_east = delta_east / dt_s
+
+        vel_error_north = self.velocity_demand_north_m_s - est_velocity_north_m_s
+        vel_error_east = self.velocity_demand_east_m_s - est_velocity_east_m_s
+        self._integrator_north += vel_i * vel_error_north * dt_s
+        self._integrator_east += vel_i * vel_error_east * dt_s
+        integrator = math.hypot(self._integrator_north, self._integrator_east)
+        if integrator > vel_imax_m_s2 > 0:
+            self._integrator_north *= vel_imax_m_s2 / integrator
+            self._integrator_east *= vel_imax_m_s2 / integrator
+        accel_north = feedforward_north + vel_p * vel_error_north + self._integrator_north
+        accel_east = feedforward_east + vel_p * vel_error_east + self._integrator_east
+        accel_limit = GRAVITY_M_S2 * math.tan(angle_max_rad)
+        accel = math.hypot(accel_north, accel_east)
+        if accel > accel_limit:
+            accel_north *= accel_limit / accel
+            accel_east *= accel_limit / accel
+        # AC_PosControl::accel_to_lean_angles
+        cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
+        accel_forward = accel_north * cy + accel_east * sy
+        accel_right = -accel_north * sy + accel_east * cy
+        pitch_rad = math.atan(-accel_forward / GRAVITY_M_S2)
+        roll_rad = math.atan(accel_right * math.cos(pitch_rad) / GRAVITY_M_S2)
+        return roll_rad, pitch_rad
+
+
+class VerticalController:
+    """Altitude -> climb rate (sqrt controller), with climb-rate demand slewed by the vertical accel limit."""
+
+    def __init__(self) -> None:
+        self.climb_demand_m_s = 0.0
+
+    def reset(self, climb_rate_m_s: float = 0.0) -> None:
+        self.climb_demand_m_s = climb_rate_m_s
+
+    def climb_for_altitude(self, *, target_alt_m: float, est_alt_m: float, pos_p: float,
+                           accel_max_m_s2: float, speed_up_m_s: float, speed_down_m_s: float) -> float:
+        rate = sqrt_controller(target_alt_m - est_alt_m, pos_p, accel_max_m_s2)
+        return max(-speed_down_m_s, min(speed_up_m_s, rate))
+
+    def shape(self, *, dt_s: float, climb_rate_m_s: float, accel_max_m_s2: float) -> float:
+        """Slew the climb demand towards `climb_rate_m_s` at `accel_max_m_s2`; returns it."""
+        max_delta = accel_max_m_s2 * dt_s
+        delta = max(-max_delta, min(max_delta, climb_rate_m_s - self.climb_demand_m_s))
+        self.climb_demand_m_s += delta
+        return self.climb_demand_m_s

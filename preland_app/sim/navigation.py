@@ -1,0 +1,90 @@
+"""The vehicle's own estimate of where it is: GPS/EKF position error, barometer, rangefinder.
+
+The autopilot controls on these estimates, never on the true state, as a real
+one does. Frames: positions are NED in metres relative to the simulation origin
+(the true take-off spot); the estimate's error is added to the truth.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .noise import GaussianStream, GaussMarkov
+from .spec import NavigationSpec
+
+_FAST_NOISE_TAU_S = 1.0
+_BARO_NOISE_TAU_S = 0.3
+
+
+@dataclass(slots=True)
+class NavEstimate:
+    """One navigation output. Positions NED in m from the simulation origin."""
+
+    position_ok: bool
+    north_m: float
+    east_m: float
+    down_m: float
+    velocity_north_m_s: float
+    velocity_east_m_s: float
+    velocity_down_m_s: float
+    rangefinder_m: float | None
+    gps_error_north_m: float
+    gps_error_east_m: float
+
+
+class NavigationModel:
+    """Turns the true state into the autopilot's estimate, with seeded errors."""
+
+    def __init__(self, *, spec: NavigationSpec, rangefinder_min_m: float, rangefinder_max_m: float,
+                 rng: np.random.Generator) -> None:
+        self.spec = spec
+        self.rangefinder_min_m = rangefinder_min_m
+        self.rangefinder_max_m = rangefinder_max_m
+        noise = GaussianStream(rng)
+        self._noise = noise
+        self._drift_north = GaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s, noise=noise)
+        self._drift_east = GaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s, noise=noise)
+        self._fast_north = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
+        self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
+        self._baro_drift = GaussMarkov(sigma=spec.baro_drift_sigma_m, tau_s=spec.baro_drift_tau_s, noise=noise)
+        self._baro_noise = GaussMarkov(sigma=spec.baro_noise_sigma_m, tau_s=_BARO_NOISE_TAU_S, noise=noise)
+        # The EKF's height origin is set at boot, so only the baro's change since then counts.
+        self._baro_origin_m = self._baro_drift.value + self._baro_noise.value
+        self.elapsed_s = 0.0
+
+    def step(self, *, dt_s: float, north_m: float, east_m: float, down_m: float,
+             velocity_ned_m_s: tuple[float, float, float], tilt_cos: float) -> NavEstimate:
+        """Advance error processes by `dt_s` and return the estimate of the given true state."""
+        self.elapsed_s += dt_s
+        spec = self.spec
+        error_north = self._drift_north.step(dt_s) + self._fast_north.step(dt_s)
+        error_east = self._drift_east.step(dt_s) + self._fast_east.step(dt_s)
+        error_down = -(self._baro_drift.step(dt_s) + self._baro_noise.step(dt_s) - self._baro_origin_m)
+        velocity_sigma = spec.velocity_noise_sigma_m_s
+        noise = self._noise
+        rangefinder_m = None
+        if spec.rangefinder_present:
+            height_m = -down_m
+            slant_m = height_m / max(tilt_cos, 0.3) + spec.rangefinder_noise_sigma_m * noise.next()
+            if self.rangefinder_min_m <= slant_m <= self.rangefinder_max_m:
+                rangefinder_m = slant_m * tilt_cos
+        return NavEstimate(
+            position_ok=self.elapsed_s >= spec.gps_fix_delay_s,
+            north_m=north_m + error_north,
+            east_m=east_m + error_east,
+            down_m=down_m + error_down,
+            velocity_north_m_s=velocity_ned_m_s[0] + velocity_sigma * noise.next(),
+            velocity_east_m_s=velocity_ned_m_s[1] + velocity_sigma * noise.next(),
+            velocity_down_m_s=velocity_ned_m_s[2] + velocity_sigma * noise.next(),
+            rangefinder_m=rangefinder_m,
+            gps_error_north_m=error_north,
+            gps_error_east_m=error_east,
+        )
+
+
+def tilt_cosine(roll_rad: float, pitch_rad: float) -> float:
+    """cos of the angle between body down and earth down."""
+    return math.cos(roll_rad) * math.cos(pitch_rad)

@@ -1,0 +1,81 @@
+"""Buffered Gaussian noise and first-order Gauss-Markov processes.
+
+Drawing scalars one at a time from a `np.random.Generator` costs a few
+microseconds each; the simulator needs several per step, so noise is drawn in
+blocks. The stream is the same whatever the block size is asked for later,
+because blocks are always drawn with the same size.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+
+import numpy as np
+
+_BLOCK = 4096
+
+
+class GaussianStream:
+    """Standard-normal samples from one Generator, drawn in blocks."""
+
+    __slots__ = ("_rng", "_block", "_i")
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self._rng = rng
+        self._block: list[float] = []
+        self._i = 0
+
+    def next(self) -> float:
+        if self._i >= len(self._block):
+            self._block = self._rng.standard_normal(_BLOCK).tolist()
+            self._i = 0
+        value = self._block[self._i]
+        self._i += 1
+        return value
+
+
+class GaussMarkov:
+    """A first-order Gauss-Markov process with stationary std `sigma` and time constant `tau_s`.
+
+    Discretised exactly: x[k+1] = a x[k] + sigma sqrt(1 - a^2) w[k], a = exp(-dt/tau).
+    The initial value is drawn from the stationary distribution.
+    """
+
+    __slots__ = ("sigma", "tau_s", "value", "_noise", "_dt_s", "_a", "_b")
+
+    def __init__(self, *, sigma: float, tau_s: float, noise: GaussianStream) -> None:
+        self.sigma = sigma
+        self.tau_s = tau_s
+        self._noise = noise
+        self.value = sigma * noise.next()
+        self._dt_s = -1.0
+        self._a = 0.0
+        self._b = 0.0
+
+    def step(self, dt_s: float) -> float:
+        if dt_s != self._dt_s:
+            self._dt_s = dt_s
+            self._a = math.exp(-dt_s / self.tau_s) if self.tau_s > 0 else 0.0
+            self._b = self.sigma * math.sqrt(max(0.0, 1.0 - self._a * self._a))
+        self.value = self._a * self.value + self._b * self._noise.next()
+        return self.value
+
+    def retune(self, *, sigma: float, tau_s: float) -> None:
+        """Change sigma and time constant, keeping the current value (scaled to the new sigma)."""
+        if self.sigma > 0:
+            self.value *= sigma / self.sigma
+        self.sigma = sigma
+        self.tau_s = tau_s
+        self._dt_s = -1.0
+
+
+def child_rng(seed: int, stream: str) -> np.random.Generator:
+    """An independent Generator for one named random stream of a trial.
+
+    Streams are keyed by a stable hash of their name, so adding a new noise
+    source never shifts the draws of existing ones.
+    """
+    digest = hashlib.sha256(stream.encode("utf-8")).digest()
+    words = [int.from_bytes(digest[i : i + 4], "little") for i in range(0, 16, 4)]
+    return np.random.default_rng(np.random.SeedSequence([seed & 0xFFFFFFFFFFFFFFFF, *words]))

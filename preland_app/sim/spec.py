@@ -1,0 +1,111 @@
+"""What the embedded simulator is configured with: frozen dataclasses with defaults.
+
+Missions and campaigns override any of these fields by name (`environment:`
+in YAML); unknown names are rejected at load time. Defaults are chosen so that
+a GPS-only landing misses by what the sources report (see README, "Simulator").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..errors import require as _require
+from ..geo import GeoPoint
+
+# ArduPilot SITL's default home (CMAC, Canberra): a neutral, well-known place.
+DEFAULT_HOME = GeoPoint(latitude_deg=-35.363261, longitude_deg=149.165230, altitude_amsl_m=584.0)
+
+
+@dataclass(frozen=True)
+class WindSpec:
+    """Steady wind plus Dryden-style turbulence (MIL-F-8785C low-altitude scales).
+
+    `direction_from_deg`: where the wind blows from, degrees clockwise from
+    north; None draws it uniformly per trial. `turbulence_w20_m_s`: the wind
+    speed at 20 ft that sets gust intensity (sigma_w = 0.1 W20); 0 disables gusts.
+    """
+
+    speed_m_s: float = 1.5
+    direction_from_deg: float | None = None
+    turbulence_w20_m_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        _require(self.speed_m_s >= 0, "speed_m_s", "must be >= 0")
+        _require(self.turbulence_w20_m_s >= 0, "turbulence_w20_m_s", "must be >= 0")
+
+
+@dataclass(frozen=True)
+class NavigationSpec:
+    """Errors of the vehicle's own position estimate (what a GPS+EKF autopilot believes).
+
+    The horizontal GPS error is a slowly varying bias (first-order Gauss-Markov,
+    stationary std `gps_drift_sigma_m`, time constant `gps_drift_tau_s`) plus
+    fast noise (`position_noise_sigma_m`, time constant 1 s). Barometric
+    altitude drifts (`baro_drift_sigma_m`, `baro_drift_tau_s`) and is noisy; the
+    downward rangefinder is accurate within its range.
+    """
+
+    gps_drift_sigma_m: float = 0.75
+    gps_drift_tau_s: float = 120.0
+    position_noise_sigma_m: float = 0.05
+    velocity_noise_sigma_m_s: float = 0.05
+    gps_fix_delay_s: float = 3.0
+    baro_drift_sigma_m: float = 0.3
+    baro_drift_tau_s: float = 300.0
+    baro_noise_sigma_m: float = 0.05
+    rangefinder_noise_sigma_m: float = 0.02
+    rangefinder_present: bool = True
+
+    def __post_init__(self) -> None:
+        for name in (
+            "gps_drift_sigma_m",
+            "position_noise_sigma_m",
+            "velocity_noise_sigma_m_s",
+            "gps_fix_delay_s",
+            "baro_drift_sigma_m",
+            "baro_noise_sigma_m",
+            "rangefinder_noise_sigma_m",
+        ):
+            _require(getattr(self, name) >= 0, name, "must be >= 0")
+        _require(self.gps_drift_tau_s > 0, "gps_drift_tau_s", "must be > 0")
+        _require(self.baro_drift_tau_s > 0, "baro_drift_tau_s", "must be > 0")
+
+
+@dataclass(frozen=True)
+class AirframeSpec:
+    """The multirotor's response, folded into first-order lags (see README).
+
+    `attitude_tau_s`: lean-angle response to a lean demand; `climb_tau_s`:
+    climb-rate response to a climb demand; `drag_per_s`: linear drag of the
+    air-relative velocity (1/s); `crash_speed_m_s`: vertical touchdown speed
+    above which the touchdown is a crash.
+    """
+
+    attitude_tau_s: float = 0.15
+    climb_tau_s: float = 0.25
+    yaw_rate_max_deg_s: float = 60.0
+    drag_per_s: float = 0.35
+    crash_speed_m_s: float = 3.0
+    battery_capacity_mah: float = 5000.0
+    hover_current_a: float = 18.0
+    battery_cells: int = 4
+
+    def __post_init__(self) -> None:
+        for name in ("attitude_tau_s", "climb_tau_s", "yaw_rate_max_deg_s", "crash_speed_m_s"):
+            _require(getattr(self, name) > 0, name, "must be > 0")
+        _require(self.drag_per_s >= 0, "drag_per_s", "must be >= 0")
+        _require(self.battery_capacity_mah > 0, "battery_capacity_mah", "must be > 0")
+        _require(self.battery_cells >= 1, "battery_cells", "must be >= 1")
+
+
+@dataclass(frozen=True)
+class EnvironmentSpec:
+    """Everything about the simulated world a mission or scenario may override."""
+
+    wind: WindSpec = field(default_factory=WindSpec)
+    navigation: NavigationSpec = field(default_factory=NavigationSpec)
+    airframe: AirframeSpec = field(default_factory=AirframeSpec)
+    physics_rate_hz: float = 100.0
+
+    def __post_init__(self) -> None:
+        _require(20.0 <= self.physics_rate_hz <= 1000.0, "physics_rate_hz", "must be within 20..1000")
