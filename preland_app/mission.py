@@ -162,11 +162,13 @@ class MissionRunner:
     async def _fly_to_waypoint(self, index: int, target: PositionNed) -> None:
         await self.vehicle.goto_ned(position_ned_m=target)
         radius_m = self.spec.path.acceptance_radius_m
+        settle_m_s = self.spec.path.settle_speed_m_s
         reached: list[Telemetry] = []
 
         async def arrived() -> bool:
             t = await self._telemetry()
-            if t.position_ned_m.horizontal_distance_m(target) <= radius_m:
+            if (t.position_ned_m.horizontal_distance_m(target) <= radius_m
+                    and t.velocity_ned_m_s.horizontal_m_s <= settle_m_s):
                 reached.append(t)
                 return True
             return False

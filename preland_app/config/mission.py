@@ -58,11 +58,13 @@ class PathSpec:
     """Waypoints in m (north, east) relative to the position recorded after take-off, flown at take-off altitude.
 
     A waypoint counts as reached when the vehicle's *estimated* position is
-    within `acceptance_radius_m` of it.
+    within `acceptance_radius_m` of it and its estimated horizontal speed is at
+    most `settle_speed_m_s` (it has arrived, not just passed by).
     """
 
     waypoints_rel_ned_m: tuple[tuple[float, float], ...]
-    acceptance_radius_m: float = 0.3
+    acceptance_radius_m: float = 0.2
+    settle_speed_m_s: float = 0.25
 
     def __post_init__(self) -> None:
         require(len(self.waypoints_rel_ned_m) > 0, "waypoints_rel_ned_m", "needs at least one waypoint")
@@ -70,6 +72,7 @@ class PathSpec:
             require(math.isfinite(north) and math.isfinite(east) and math.hypot(north, east) <= 1000.0,
                     f"waypoints_rel_ned_m[{i}]", "must be finite and within 1000 m")
         require(0.05 <= self.acceptance_radius_m <= 10.0, "acceptance_radius_m", "must be within 0.05..10 m")
+        require(0.05 <= self.settle_speed_m_s <= 20.0, "settle_speed_m_s", "must be within 0.05..20 m/s")
 
 
 @dataclass(frozen=True)

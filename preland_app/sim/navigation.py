@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .noise import GaussianStream, GaussMarkov
+from .noise import GaussianStream, GaussMarkov, SmoothGaussMarkov
 from .spec import NavigationSpec
 
 _FAST_NOISE_TAU_S = 1.0
@@ -45,8 +45,10 @@ class NavigationModel:
         self.rangefinder_max_m = rangefinder_max_m
         noise = GaussianStream(rng)
         self._noise = noise
-        self._drift_north = GaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s, noise=noise)
-        self._drift_east = GaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s, noise=noise)
+        self._drift_north = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
+                                              smooth_s=spec.gps_drift_smooth_s, noise=noise)
+        self._drift_east = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
+                                             smooth_s=spec.gps_drift_smooth_s, noise=noise)
         self._fast_north = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
         self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
         self._baro_drift = GaussMarkov(sigma=spec.baro_drift_sigma_m, tau_s=spec.baro_drift_tau_s, noise=noise)

@@ -70,6 +70,30 @@ class GaussMarkov:
         self._dt_s = -1.0
 
 
+class SmoothGaussMarkov:
+    """A Gauss-Markov process passed through a first-order low-pass filter (time constant `smooth_s`).
+
+    Its stationary std is `sigma` and its correlation time about `tau_s`, like
+    `GaussMarkov`, but it changes smoothly over seconds instead of jittering:
+    the shape of a GPS position error, which wanders rather than jumps.
+    """
+
+    __slots__ = ("value", "_inner", "_smooth_s")
+
+    def __init__(self, *, sigma: float, tau_s: float, smooth_s: float, noise: GaussianStream) -> None:
+        # A first-order low-pass of a GM process scales its variance by tau / (tau + smooth).
+        inner_sigma = sigma * math.sqrt((tau_s + smooth_s) / tau_s)
+        self._inner = GaussMarkov(sigma=inner_sigma, tau_s=tau_s, noise=noise)
+        self._smooth_s = smooth_s
+        # Start next to the inner process (scaled to the output's spread) so there is no start-up transient.
+        self.value = self._inner.value * sigma / inner_sigma if inner_sigma > 0 else 0.0
+
+    def step(self, dt_s: float) -> float:
+        inner = self._inner.step(dt_s)
+        self.value += (inner - self.value) * min(1.0, dt_s / self._smooth_s)
+        return self.value
+
+
 def child_rng(seed: int, stream: str) -> np.random.Generator:
     """An independent Generator for one named random stream of a trial.
 

@@ -38,8 +38,9 @@ class WindSpec:
 class NavigationSpec:
     """Errors of the vehicle's own position estimate (what a GPS+EKF autopilot believes).
 
-    The horizontal GPS error is a slowly varying bias (first-order Gauss-Markov,
-    stationary std `gps_drift_sigma_m`, time constant `gps_drift_tau_s`) plus
+    The horizontal GPS error is a slowly varying bias (a Gauss-Markov process,
+    stationary std `gps_drift_sigma_m`, time constant `gps_drift_tau_s`,
+    low-pass filtered with `gps_drift_smooth_s` so it wanders smoothly) plus
     fast noise (`position_noise_sigma_m`, time constant 1 s). Barometric
     altitude drifts (`baro_drift_sigma_m`, `baro_drift_tau_s`) and is noisy; the
     downward rangefinder is accurate within its range.
@@ -47,6 +48,7 @@ class NavigationSpec:
 
     gps_drift_sigma_m: float = 0.75
     gps_drift_tau_s: float = 120.0
+    gps_drift_smooth_s: float = 10.0
     position_noise_sigma_m: float = 0.05
     velocity_noise_sigma_m_s: float = 0.05
     gps_fix_delay_s: float = 3.0
@@ -68,6 +70,7 @@ class NavigationSpec:
         ):
             _require(getattr(self, name) >= 0, name, "must be >= 0")
         _require(self.gps_drift_tau_s > 0, "gps_drift_tau_s", "must be > 0")
+        _require(self.gps_drift_smooth_s > 0, "gps_drift_smooth_s", "must be > 0")
         _require(self.baro_drift_tau_s > 0, "baro_drift_tau_s", "must be > 0")
 
 
