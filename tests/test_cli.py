@@ -1,0 +1,42 @@
+"""The CLI, in-process."""
+
+import json
+
+from typer.testing import CliRunner
+
+from preland_app.cli import app
+
+from .conftest import THESIS_MISSION
+
+REQUIRED = {"outcome", "landing_error_cm", "offset_north_cm", "offset_east_cm", "landing_time_s", "seed"}
+
+
+def test_fly_json_prints_one_object_with_the_outcome_keys():
+    result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--seed", "5", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert REQUIRED <= set(data)
+    assert data["outcome"] == "landed" and data["seed"] == 5
+    assert 0 < data["landing_error_cm"] < 300
+    assert abs((data["offset_north_cm"] ** 2 + data["offset_east_cm"] ** 2) ** 0.5 - data["landing_error_cm"]) < 0.05
+
+
+def test_fly_table_and_takeoff_override():
+    result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--seed", "5", "--takeoff-altitude-m", "6",
+                                      "--events"])
+    assert result.exit_code == 0, result.output
+    assert "landing error" in result.stdout and "6.0 m" in result.stdout
+    assert "waypoint 4 reached" in result.stdout
+
+
+def test_every_command_has_help():
+    runner = CliRunner()
+    for args in ([], ["fly"], ["modes"]):
+        result = runner.invoke(app, [*args, "--help"])
+        assert result.exit_code == 0
+        assert "Usage" in result.stdout
+
+
+def test_modes_lists_normal():
+    result = CliRunner().invoke(app, ["modes"])
+    assert result.exit_code == 0 and result.stdout.startswith("normal")

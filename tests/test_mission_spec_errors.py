@@ -1,0 +1,80 @@
+"""Bad mission files: one line naming the file and the field, exit code 2, no traceback."""
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from preland_app.cli import app
+from preland_app.config.mission import load_mission
+from preland_app.errors import SpecError
+
+from .conftest import THESIS_MISSION
+
+GOOD = THESIS_MISSION.read_text()
+
+
+def _variant(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "mission.yaml"
+    path.write_text(text)
+    return path
+
+
+CASES = {
+    "malformed_yaml": (GOOD.replace("  altitude_rel_m: 10.0", "  altitude_rel_m: [10.0"), "", "malformed YAML"),
+    "missing_field": (GOOD.replace("  altitude_rel_m: 10.0\n", ""), "takeoff.altitude_rel_m", "missing required field"),
+    "wrong_type": (GOOD.replace("altitude_rel_m: 10.0", "altitude_rel_m: ten"), "takeoff.altitude_rel_m",
+                   "expected a number"),
+    "unknown_land_mode": (GOOD.replace("mode: normal", "mode: teleport"), "land.mode", "unknown land mode 'teleport'"),
+    "negative_altitude": (GOOD.replace("altitude_rel_m: 10.0", "altitude_rel_m: -5"), "takeoff.altitude_rel_m",
+                          "must be > 0"),
+    "unknown_key": (GOOD.replace("land:\n", "land:\n  speeed: 3\n"), "land.speeed", "unknown key"),
+    "bad_waypoint": (GOOD.replace("- [-2.0, 2.0]", "- [-2.0]"), "path.waypoints_rel_ned_m[1]",
+                     "expected a list of 2 values"),
+    "unknown_param": (GOOD + "params:\n  LAND_SPEEED: 30\n", "params.LAND_SPEEED", "unknown autopilot parameter"),
+    "top_level_list": ("- 1\n- 2\n", "", "expected a mapping at the top level"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_bad_mission_file_gives_one_clear_line(tmp_path, case):
+    text, field, problem = CASES[case]
+    path = _variant(tmp_path, text)
+    result = CliRunner().invoke(app, ["fly", str(path)])
+    assert result.exit_code == 2
+    message = result.stderr.strip()
+    assert len(message.splitlines()) == 1, message
+    assert "Traceback" not in result.output
+    assert str(path) in message
+    assert field in message
+    assert problem in message
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_loader_raises_spec_error_with_field(tmp_path, case):
+    text, field, _ = CASES[case]
+    with pytest.raises(SpecError) as info:
+        load_mission(_variant(tmp_path, text))
+    assert info.value.field.startswith(field) if field else True
+    assert info.value.path.endswith("mission.yaml")
+
+
+def test_missing_file_and_bad_options(tmp_path):
+    runner = CliRunner()
+    result = runner.invoke(app, ["fly", str(tmp_path / "nope.yaml")])
+    assert result.exit_code == 2 and "file not found" in result.stderr
+    result = runner.invoke(app, ["fly", str(THESIS_MISSION), "--land", "teleport"])
+    assert result.exit_code == 2 and "--land" in result.stderr and "normal" in result.stderr
+    result = runner.invoke(app, ["fly", str(THESIS_MISSION), "--takeoff-altitude-m", "-3"])
+    assert result.exit_code == 2 and "--takeoff-altitude-m" in result.stderr
+
+
+def test_thesis_mission_loads_with_the_sources_numbers():
+    mission = load_mission(THESIS_MISSION)
+    assert mission.takeoff.altitude_rel_m == 10.0
+    assert mission.pad.offset_from_start_ned_m == (2.0, 0.0)
+    legs = [mission.path.waypoints_rel_ned_m[0]] + [
+        (b[0] - a[0], b[1] - a[1]) for a, b in zip(mission.path.waypoints_rel_ned_m, mission.path.waypoints_rel_ned_m[1:])
+    ]
+    assert [abs(n) + abs(e) for n, e in legs] == [2.0, 2.0, 2.0, 2.0]
+    assert mission.path.waypoints_rel_ned_m[-1] == (0.0, 0.0)
