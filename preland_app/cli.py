@@ -116,6 +116,38 @@ def fly(
         raise typer.Exit(EXIT_FAILED)
 
 
+pad_app = typer.Typer(help="Landing pads: render printable pads.", no_args_is_help=True)
+app.add_typer(pad_app, name="pad")
+
+
+@pad_app.command("render")
+def pad_render(
+    out: Path = typer.Option(..., "--out", help="Output file: .png or .pdf."),
+    preset: Optional[str] = typer.Option(None, "--preset", help="Pad preset: thesis or paper."),
+    pad_file: Optional[Path] = typer.Option(None, "--pad", help="A pad YAML file instead of a preset."),
+    dpi: int = typer.Option(100, "--dpi", help="Print resolution in dots per inch."),
+) -> None:
+    """Render a printable landing pad at true scale, with its dimensions annotated."""
+    from .sensing.pad import PAD_PRESETS, load_pad
+    from .sensing.pad_render import render_printable_pad
+
+    if (preset is None) == (pad_file is None):
+        raise fail("give exactly one of --preset or --pad")
+    if out.suffix.lower() not in (".png", ".pdf"):
+        raise fail(f"--out: {out} must end in .png or .pdf")
+    if not 20 <= dpi <= 600:
+        raise fail(f"--dpi: must be within 20..600, got {dpi}")
+    if preset is not None and preset not in PAD_PRESETS:
+        raise fail(f"--preset: unknown pad preset {preset!r} (expected one of: {', '.join(PAD_PRESETS)})")
+    try:
+        pad = load_pad(preset if preset is not None else str(pad_file))
+    except PrelandError as error:
+        raise fail(str(error)) from None
+    path = render_printable_pad(pad, out, dpi=dpi)
+    typer.echo(f"wrote {path} ({pad.name}: {pad.size_m * 100:.0f} cm sheet, "
+               + ", ".join(f"id {m.id} {m.side_m * 100:.0f} cm" for m in pad.markers) + ")")
+
+
 @app.command("modes")
 def modes() -> None:
     """List the land modes this version can fly."""

@@ -20,6 +20,7 @@ from .config.mission import MissionSpec
 from .errors import CommandDenied, MissionAborted
 from .events import EventLog
 from .landing.base import LandingContext, LandingReport, LandStrategy
+from .sensing.suite import SensorSuite
 from .vehicle.protocol import Vehicle
 from .vehicle.types import FlightMode, PositionNed, Telemetry
 
@@ -50,6 +51,7 @@ class MissionRunner:
         strategy: LandStrategy,
         events: EventLog,
         rng: np.random.Generator,
+        sensors: SensorSuite | None = None,
         takeoff_altitude_rel_m: float | None = None,
     ) -> None:
         self.spec = spec
@@ -58,6 +60,7 @@ class MissionRunner:
         self.strategy = strategy
         self.events = events
         self.rng = rng
+        self.sensors = sensors
         self.takeoff_altitude_rel_m = (
             takeoff_altitude_rel_m if takeoff_altitude_rel_m is not None
             else spec.takeoff_altitude_rel_m(strategy.name)
@@ -139,7 +142,7 @@ class MissionRunner:
 
         self._landing = True
         context = LandingContext(vehicle=vehicle, clock=clock, events=self.events, rng=self.rng,
-                                 timeout_s=timeouts.land_s, poll_period_s=POLL_PERIOD_S)
+                                 timeout_s=timeouts.land_s, poll_period_s=POLL_PERIOD_S, sensors=self.sensors)
         report.landing = await self.strategy.land(context)
         command = self.events.first("land_command")
         report.land_command_time_s = command.time_s if command else None

@@ -31,12 +31,15 @@ def test_fly_table_and_takeoff_override():
 
 def test_every_command_has_help():
     runner = CliRunner()
-    for args in ([], ["fly"], ["modes"]):
+    for args in ([], ["fly"], ["modes"], ["pad"], ["pad", "render"]):
         result = runner.invoke(app, [*args, "--help"])
         assert result.exit_code == 0
         assert "Usage" in result.stdout
 
 
-def test_modes_lists_normal():
+def test_modes_lists_every_land_mode_with_its_scoring_reference():
     result = CliRunner().invoke(app, ["modes"])
-    assert result.exit_code == 0 and result.stdout.startswith("normal")
+    assert result.exit_code == 0
+    lines = {line.split()[0]: line for line in result.stdout.splitlines()}
+    assert set(lines) == {"normal", "irlock", "marker", "fused"}
+    assert "takeoff" in lines["normal"] and all("pad" in lines[m] for m in ("irlock", "marker", "fused"))

@@ -16,6 +16,8 @@ from pathlib import Path
 from ..errors import SpecError, require
 from ..landing.registry import LAND_MODES, land_mode_names
 from ..sim.params import ARDUCOPTER_PARAMS
+from ..sensing.pad import PAD_PRESETS, PadSpec, load_pad
+from ..sensing.spec import SensorsSpec
 from ..sim.spec import EnvironmentSpec
 from .loader import build, read_yaml_mapping
 
@@ -24,13 +26,18 @@ _MAX_ALTITUDE_M = 120.0  # the usual legal ceiling for small drones
 
 @dataclass(frozen=True)
 class PadPlacementSpec:
-    """Where the landing pad's centre is, in m NED (north, east) from the vehicle's start position."""
+    """Which landing pad (`preset`: thesis, paper, or a pad YAML file relative to the mission), where its
+    centre is in m NED (north, east) from the vehicle's start position, and its yaw in degrees."""
 
+    preset: str = "thesis"
     offset_from_start_ned_m: tuple[float, float] = (2.0, 0.0)
+    yaw_deg: float = 0.0
 
     def __post_init__(self) -> None:
         require(all(math.isfinite(v) for v in self.offset_from_start_ned_m), "offset_from_start_ned_m",
                 "must be finite numbers")
+        require(self.preset in PAD_PRESETS or self.preset.endswith((".yaml", ".yml")), "preset",
+                f"unknown pad preset {self.preset!r} (expected one of: {', '.join(PAD_PRESETS)}, or a .yaml file)")
 
 
 @dataclass(frozen=True)
@@ -113,6 +120,7 @@ class MissionSpec:
     pad: PadPlacementSpec = field(default_factory=PadPlacementSpec)
     timeouts: TimeoutsSpec = field(default_factory=TimeoutsSpec)
     environment: EnvironmentSpec = field(default_factory=EnvironmentSpec)
+    sensors: SensorsSpec = field(default_factory=SensorsSpec)
     params: dict[str, float] = field(default_factory=dict)
     initial_yaw_deg: float = 0.0
     source_path: str = field(default="", compare=False)
@@ -126,6 +134,18 @@ class MissionSpec:
     def takeoff_altitude_rel_m(self, land_mode: str | None = None) -> float:
         return self.takeoff.altitude_for(land_mode or self.land.mode)
 
+    @property
+    def base_dir(self) -> Path:
+        """Where relative paths in the mission (pad file, camera calibration) are resolved from."""
+        return Path(self.source_path).parent if self.source_path else Path.cwd()
+
+    def pad_spec(self) -> PadSpec:
+        preset = self.pad.preset
+        if preset in PAD_PRESETS:
+            return PAD_PRESETS[preset]
+        path = Path(preset)
+        return load_pad(str(path if path.is_absolute() else self.base_dir / path))
+
     def with_land_mode(self, land_mode: str) -> "MissionSpec":
         """This mission with another land mode (validated)."""
         return replace(self, land=LandSpec(mode=land_mode))
@@ -137,5 +157,15 @@ def load_mission(path: str | Path) -> MissionSpec:
     data = read_yaml_mapping(path)
     if "source_path" in data:
         raise SpecError(path=path_text, field="source_path", problem="unknown key")
-    spec = build(MissionSpec, data, path=path_text)
-    return replace(spec, source_path=path_text)
+    spec = replace(build(MissionSpec, data, path=path_text), source_path=path_text)
+    # Resolve referenced files now, so a bad pad or calibration file is reported at load time.
+    try:
+        spec.pad_spec()
+    except SpecError as error:
+        raise SpecError(path=path_text, field="pad.preset", problem=str(error)) from None
+    if spec.sensors.camera.calibration is not None:
+        try:
+            spec.sensors.camera.model(relative_to=spec.base_dir)
+        except SpecError as error:
+            raise SpecError(path=path_text, field="sensors.camera.calibration", problem=str(error)) from None
+    return spec

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..clock import Clock
 from ..events import EventLog
+from ..sensing.suite import SensorSuite
 from ..vehicle.protocol import Vehicle
 
 
@@ -36,6 +37,7 @@ class LandingContext:
     rng: np.random.Generator
     timeout_s: float
     poll_period_s: float = 0.1
+    sensors: SensorSuite | None = None
 
 
 @dataclass
@@ -48,6 +50,8 @@ class LandingReport:
 class LandStrategy(Protocol):
     name: str
     scoring_reference: ScoringReference
+    uses_irlock: bool
+    uses_marker: bool
 
     async def land(self, context: LandingContext) -> LandingReport:
         """Land and return once disarmed on the ground; raises on timeout or refusal."""

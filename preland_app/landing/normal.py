@@ -12,6 +12,8 @@ class NormalLanding:
 
     name = "normal"
     scoring_reference = ScoringReference.TAKEOFF
+    uses_irlock = False
+    uses_marker = False
 
     async def land(self, context: LandingContext) -> LandingReport:
         vehicle = context.vehicle

@@ -6,9 +6,13 @@ from collections.abc import Callable
 
 from .base import LandStrategy
 from .normal import NormalLanding
+from .precision import PrecisionLanding
 
 LAND_MODES: dict[str, Callable[[], LandStrategy]] = {
     "normal": NormalLanding,
+    "irlock": lambda: PrecisionLanding("irlock"),
+    "marker": lambda: PrecisionLanding("marker"),
+    "fused": lambda: PrecisionLanding("fused"),
 }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import math
 from dataclasses import dataclass
 
 from ..clock import LoopClock, run_virtual
@@ -16,6 +17,11 @@ from ..outcome import Outcome, TrialOutcome, score_touchdown
 from ..sim.noise import child_rng
 from ..sim.simulator import Simulator
 from ..vehicle.sim_backend import SimVehicle
+from ..sensing.irlock import IrLockModel
+from ..sensing.marker import TrackingMarkerDetector
+from ..sensing.sources import IrLockSource, VirtualFrameSource
+from ..sensing.suite import SensorSuite
+from ..sensing.virtual_camera import CameraPose, VirtualCamera
 from .recorder import TrajectoryRecorder
 
 
@@ -44,8 +50,10 @@ async def fly_embedded(request: TrialRequest) -> TrialOutcome:
                           initial_yaw_deg=mission.initial_yaw_deg)
     vehicle = SimVehicle(simulator=simulator, clock=clock)
     events = EventLog(clock)
+    sensors = build_sensor_suite(mission=mission, seed=request.seed, simulator=simulator, clock=clock,
+                                 camera=strategy.uses_marker, irlock=strategy.uses_irlock)
     runner = MissionRunner(spec=mission, vehicle=vehicle, strategy=strategy, events=events,
-                           rng=child_rng(request.seed, "landing"),
+                           rng=child_rng(request.seed, "landing"), sensors=sensors,
                            takeoff_altitude_rel_m=request.takeoff_altitude_rel_m)
 
     def truth() -> tuple[float, float, float]:
@@ -77,6 +85,36 @@ async def fly_embedded(request: TrialRequest) -> TrialOutcome:
                   outcome=outcome, message=message, scoring=strategy.scoring_reference,
                   takeoff_altitude_rel_m=runner.takeoff_altitude_rel_m,
                   trajectory=recorder.array() if request.record_trajectory else None)
+
+
+def build_sensor_suite(*, mission: MissionSpec, seed: int, simulator: Simulator, clock, camera: bool,
+                       irlock: bool) -> SensorSuite:
+    """The companion's sensors on the embedded simulator: they see the world through the true pose."""
+    spec = mission.sensors
+    suite = SensorSuite(spec=spec)
+    if not (camera or irlock):
+        return suite
+    pad = mission.pad_spec()
+    pad_origin = mission.pad.offset_from_start_ned_m
+
+    def true_pose() -> CameraPose:
+        pose = simulator.true_pose()
+        return CameraPose(pose.north_m, pose.east_m, pose.down_m, pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
+
+    if camera:
+        model = spec.camera.model(relative_to=mission.base_dir)
+        renderer = VirtualCamera(camera=model, pad=pad, pad_origin_ned_m=pad_origin, pad_yaw_deg=mission.pad.yaw_deg,
+                                 rng=child_rng(seed, "camera"), effects=spec.camera.effects())
+        suite.camera = VirtualFrameSource(renderer=renderer, pose=true_pose, clock=clock)
+        suite.marker_detector = TrackingMarkerDetector(pad=pad, camera=model)
+    if irlock and pad.beacon_m is not None:
+        yaw = math.radians(mission.pad.yaw_deg)
+        bn, be = pad.beacon_m
+        beacon = (pad_origin[0] + bn * math.cos(yaw) - be * math.sin(yaw),
+                  pad_origin[1] + bn * math.sin(yaw) + be * math.cos(yaw))
+        model_ir = IrLockModel(spec=spec.irlock, beacon_ned_m=beacon, rng=child_rng(seed, "irlock"))
+        suite.irlock = IrLockSource(model=model_ir, pose=true_pose, clock=clock)
+    return suite
 
 
 def _score(*, request: TrialRequest, mission: MissionSpec, simulator: Simulator, report: MissionReport,

@@ -27,10 +27,17 @@ from .control import HorizontalController, VerticalController, sqrt_controller, 
 from .dynamics import ActuatorDemand
 from .navigation import NavEstimate
 from .params import ParameterTable
+from .precland import PrecisionLandingEstimator
 
 LAND_DETECTOR_TRIGGER_S = 1.0  # ArduCopter LAND_DETECTOR_TRIGGER_SEC
 LAND_DETECTOR_MAYBE_TRIGGER_S = 0.2  # LAND_DETECTOR_MAYBE_TRIGGER_SEC
 LAND_RANGEFINDER_MIN_ALT_M = 2.0  # LAND_RANGEFINDER_MIN_ALT_CM
+# mode_land.cpp's precision-landing slow-down near the ground.
+PRECLAND_SLOWDOWN_MIN_HEIGHT_M = 0.35
+PRECLAND_SLOWDOWN_MAX_HEIGHT_M = 2.0
+PRECLAND_ACCEPTABLE_ERROR_M = 0.15
+PRECLAND_MIN_DESCENT_SPEED_M_S = 0.10
+PLND_TYPE_COMPANION = 1
 TAKEOFF_COMPLETE_MARGIN_M = 0.1
 _ARMABLE_MODES = (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.STABILIZE)
 
@@ -70,9 +77,13 @@ class Autopilot:
         self.home_east_m = 0.0
         self.home_down_m = 0.0
         self.messages: list[StatusText] = []
-        self.landing_targets: list[tuple[float, LandingTarget]] = []
+        self.landing_targets_received = 0
+        self.precland = PrecisionLandingEstimator(params)
+        self._precland_active = False
         self.nav: NavEstimate | None = None
         self.yaw_rad = initial_yaw_rad
+        self.roll_rad = 0.0
+        self.pitch_rad = 0.0
         self.yaw_target_rad = initial_yaw_rad
         self._xy = HorizontalController()
         self._z = VerticalController()
@@ -170,6 +181,7 @@ class Autopilot:
             self._hold_here()
         elif mode in (FlightMode.LOITER, FlightMode.LAND):
             self._hold_here()
+            self._precland_active = False
         elif mode is FlightMode.RTL:
             self._rtl_stage = RtlStage.CLIMB
             self._rtl_stage_time_s = self._now_s
@@ -224,12 +236,15 @@ class Autopilot:
         self._guided = GuidedTarget.POSITION
         self._hold_here()
 
+    def precland_enabled(self) -> bool:
+        return self.params.value("PLND_ENABLED") == 1 and self.params.value("PLND_TYPE") == PLND_TYPE_COMPANION
+
     def receive_landing_target(self, target: LandingTarget) -> None:
-        """LANDING_TARGET from a companion. Kept for the precision-landing controller."""
-        self.landing_targets.append((self._now_s, target))
-        # Only the recent past matters to any estimator; keep memory bounded.
-        if len(self.landing_targets) > 512:
-            del self.landing_targets[:256]
+        """LANDING_TARGET from a companion: fused by the precision-landing estimator when PLND is enabled
+        with a companion source (PLND_TYPE=1); ignored otherwise, as ArduCopter does."""
+        self.landing_targets_received += 1
+        if self.precland_enabled():
+            self.precland.handle(self._now_s, target)
 
     # ------------------------------------------------------------------ state
 
@@ -245,11 +260,17 @@ class Autopilot:
     # ------------------------------------------------------------------ control loop
 
     def step(self, *, dt_s: float, now_s: float, nav: NavEstimate, yaw_rad: float,
-             touching_ground: bool) -> ActuatorDemand:
+             touching_ground: bool, roll_rad: float = 0.0, pitch_rad: float = 0.0) -> ActuatorDemand:
         """Run one control cycle on the estimate; returns the actuator demand."""
         self._now_s = now_s
         self.nav = nav
         self.yaw_rad = yaw_rad
+        self.roll_rad = roll_rad
+        self.pitch_rad = pitch_rad
+        if self.precland_enabled():
+            self.precland.record_pose(now_s, north_m=nav.north_m, east_m=nav.east_m,
+                                      height_m=self.height_above_ground_m(), roll_rad=self.roll_rad,
+                                      pitch_rad=self.pitch_rad, yaw_rad=yaw_rad)
         if not self.armed:
             self.last_climb_demand_m_s = 0.0
             return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
@@ -376,8 +397,38 @@ class Autopilot:
         return max(-max_descent, min(-land_speed, rate))
 
     def _run_land(self, dt_s: float, nav: NavEstimate, north_m: float, east_m: float) -> ActuatorDemand:
+        climb_rate = self.land_descent_rate_m_s()
+        if self.precland_enabled():
+            target = self.precland.target_position_m(self._now_s)
+            if target is not None:
+                if not self._precland_active:
+                    self._say("PrecLand: target acquired")
+                self._precland_active = True
+                north_m, east_m = target
+                self._target_north_m, self._target_east_m = target
+                climb_rate = self._precland_descent_rate_m_s(nav, target, climb_rate)
+            elif self._precland_active:
+                # Target lost: hold where we are and keep descending (PLND_STRICT=0 behaviour).
+                self._precland_active = False
+                self._say("PrecLand: target lost")
+                north_m, east_m = self._stopping_point()
+                self._target_north_m, self._target_east_m = north_m, east_m
         return self._fly_to(dt_s, nav, north_m, east_m, None, speed_max_m_s=self.params.m_s("LOIT_SPEED"),
-                            climb_rate_m_s=self.land_descent_rate_m_s())
+                            climb_rate_m_s=climb_rate)
+
+    def _precland_descent_rate_m_s(self, nav: NavEstimate, target: tuple[float, float], climb_rate: float) -> float:
+        """mode_land.cpp with a target: no descent while farther than PLND_XY_DIST_MAX; between 0.35 and
+        2 m above the target, descend slower the larger the horizontal error."""
+        error_m = math.hypot(target[0] - nav.north_m, target[1] - nav.east_m)
+        xy_dist_max_m = self.params.value("PLND_XY_DIST_MAX")
+        if xy_dist_max_m > 0 and error_m > xy_dist_max_m:
+            return 0.0
+        height_m = self.precland.last_measured_height_m
+        if height_m is not None and PRECLAND_SLOWDOWN_MIN_HEIGHT_M < height_m < PRECLAND_SLOWDOWN_MAX_HEIGHT_M:
+            max_descent = abs(self.params.m_s("LAND_SPEED")) * 0.5
+            slowdown = max(0.0, error_m * max_descent / PRECLAND_ACCEPTABLE_ERROR_M)
+            return min(-PRECLAND_MIN_DESCENT_SPEED_M_S, -max_descent + slowdown)
+        return climb_rate
 
     def _run_rtl(self, dt_s: float, nav: NavEstimate) -> ActuatorDemand:
         p = self.params

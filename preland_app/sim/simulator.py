@@ -89,7 +89,7 @@ class Simulator:
                               s.velocity_east_m_s - self.wind.current_ned_m_s[1])
         wind = self.wind.step(dt_s=dt_s, altitude_m=-s.down_m, airspeed_m_s=airspeed)
         demand = self.autopilot.step(dt_s=dt_s, now_s=self.time_s, nav=self.nav, yaw_rad=s.yaw_rad,
-                                     touching_ground=s.on_ground)
+                                     touching_ground=s.on_ground, roll_rad=s.roll_rad, pitch_rad=s.pitch_rad)
         self.dynamics.step(dt_s=dt_s, time_s=self.time_s + dt_s, demand=demand, wind_ned_m_s=wind)
         self.time_s += dt_s
         self.steps += 1

@@ -1,0 +1,1 @@
+"""Sensing: landing pads, cameras (virtual and real), marker detection, IR-LOCK, fusion."""

@@ -1,0 +1,33 @@
+"""What a precision-landing sensor produces: the direction (and maybe the range) to the target."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..vehicle.types import LandingTarget
+
+
+@dataclass(frozen=True, slots=True)
+class TargetReading:
+    """One sensor value. Angles in rad off the downward camera axis, body FRD convention of
+    LANDING_TARGET (angle_x > 0: target to the right; angle_y > 0: target behind);
+    `distance_m` is the range to the target or None; `capture_time_s` is when the
+    underlying image or sample was taken (vehicle clock); `sensor` names the source."""
+
+    sensor: str
+    capture_time_s: float
+    angle_x_rad: float
+    angle_y_rad: float
+    distance_m: float | None = None
+    marker_id: int | None = None
+
+    def to_landing_target(self) -> LandingTarget:
+        return LandingTarget(timestamp_s=self.capture_time_s, angle_x_rad=self.angle_x_rad,
+                             angle_y_rad=self.angle_y_rad, distance_m=self.distance_m,
+                             target_num=self.marker_id or 0)
+
+
+def angles_from_camera_point(x_m: float, y_m: float, z_m: float) -> tuple[float, float]:
+    """LANDING_TARGET angles of a point in the (downward, nose-up-in-image) OpenCV camera frame."""
+    return math.atan2(x_m, z_m), math.atan2(y_m, z_m)

@@ -1,0 +1,83 @@
+"""Precision land modes end to end, and the onboard precision landing fed through the Vehicle protocol."""
+
+import math
+
+import pytest
+
+from preland_app.clock import run_virtual
+from preland_app.outcome import Outcome
+from preland_app.runtime.embedded import TrialRequest, run_trial
+from preland_app.vehicle.types import FlightMode, LandingTarget
+
+from .test_sim_autopilot import CALM, airborne, fly
+
+
+@pytest.mark.parametrize("mode", ["irlock", "marker", "fused"])
+def test_precision_modes_land_on_the_pad(thesis_mission, mode):
+    for seed in (0, 1):
+        outcome = run_trial(TrialRequest(mission=thesis_mission, seed=seed, land_mode=mode, record_trajectory=False))
+        assert outcome.outcome is Outcome.LANDED, outcome.message
+        assert outcome.scoring_reference == "pad"
+        assert outcome.landing_error_cm < 15.0
+        assert outcome.details["landing_targets_sent"] > 100
+    expected_altitude = 6.0 if mode == "marker" else 10.0
+    assert outcome.takeoff_altitude_rel_m == expected_altitude
+
+
+def test_fused_mode_uses_both_sensors_and_averages_when_both_are_new(thesis_mission):
+    outcome = run_trial(TrialRequest(mission=thesis_mission, seed=3, land_mode="fused", record_trajectory=False))
+    assert outcome.details["fused_both"] > 50
+    assert outcome.details["fused_irlock"] > 50
+    assert outcome.details["irlock_values"] > outcome.details["marker_values"] > 50
+
+
+def _companion_pointing(offset_north_m, offset_east_m, *, enable, stop_below_m=None):
+    """Fly up, then LAND while a companion reports the target at a fixed NED spot near the start."""
+
+    async def scenario(vehicle, simulator, clock):
+        if enable:
+            for name, value in {"PLND_ENABLED": 1, "PLND_TYPE": 1, "PLND_STRICT": 0}.items():
+                await vehicle.set_param(name, value)
+        await airborne(vehicle, clock, altitude_m=8.0)
+        await vehicle.set_mode(FlightMode.LAND)
+        while (await vehicle.telemetry()).armed:
+            truth = simulator.true_pose()
+            height = -truth.down_m
+            if stop_below_m is None or height > stop_below_m:
+                # Line of sight from the true pose (body = NED rotated by yaw; level enough here).
+                dn, de = offset_north_m - truth.north_m, offset_east_m - truth.east_m
+                c, s = math.cos(truth.yaw_rad), math.sin(truth.yaw_rad)
+                forward, right = dn * c + de * s, -dn * s + de * c
+                await vehicle.send_landing_target(LandingTarget(
+                    timestamp_s=clock.now_s(), angle_x_rad=math.atan2(right, max(height, 0.1)),
+                    angle_y_rad=math.atan2(-forward, max(height, 0.1))))
+            await clock.sleep(0.05)
+        return simulator.touchdowns()[-1], simulator.autopilot.messages
+
+    return fly(scenario, environment=CALM)
+
+
+def test_landing_target_steers_land_when_precision_landing_is_enabled():
+    touchdown, messages = _companion_pointing(1.5, -1.0, enable=True)
+    assert math.hypot(touchdown.north_m - 1.5, touchdown.east_m + 1.0) < 0.1
+    assert any("target acquired" in m.text for m in messages)
+
+
+def test_landing_target_is_ignored_without_plnd():
+    touchdown, _ = _companion_pointing(1.5, -1.0, enable=False)
+    assert math.hypot(touchdown.north_m, touchdown.east_m) < 0.5  # plain LAND near where it stood
+
+
+def test_target_lost_low_down_the_descent_continues():
+    touchdown, messages = _companion_pointing(1.5, -1.0, enable=True, stop_below_m=2.0)
+    texts = [m.text for m in messages]
+    assert "PrecLand: target lost" in texts and texts[-1].startswith("Disarming")
+    assert math.hypot(touchdown.north_m - 1.5, touchdown.east_m + 1.0) < 0.3
+
+
+def test_raw_estimator_option_also_lands_on_the_pad(thesis_mission):
+    from dataclasses import replace
+
+    mission = replace(thesis_mission, params={"PLND_EST_TYPE": 0})
+    outcome = run_trial(TrialRequest(mission=mission, seed=4, land_mode="irlock", record_trajectory=False))
+    assert outcome.outcome is Outcome.LANDED and outcome.landing_error_cm < 15.0
