@@ -75,11 +75,36 @@ def _format_outcome_table(data: dict) -> str:
     return "\n".join(f"{label:<{width}}  {value}" for label, value in rows)
 
 
+def _parse_faults(values: list[str]) -> dict[str, str]:
+    from .sensing.faults import FAULT_SYNTAX, SENSORS, FaultSpec, FaultSyntaxError
+
+    faults: dict[str, str] = {}
+    for value in values:
+        sensor, sep, text = value.partition("=")
+        sensor = sensor.strip().lower()
+        if not sep or sensor not in SENSORS:
+            raise fail(f"--fault {value!r}: expected SENSOR=FAULT with SENSOR one of {', '.join(SENSORS)}")
+        if sensor in faults:
+            raise fail(f"--fault: {sensor} given twice (one fault per sensor)")
+        try:
+            FaultSpec.parse(text)
+        except FaultSyntaxError as error:
+            raise fail(f"--fault {value!r}: {error}") from None
+        faults[sensor] = text
+    return faults
+
+
 @app.command()
 def fly(
     mission_file: Path = typer.Argument(..., metavar="MISSION", help="Mission YAML file (see missions/)."),
     land: Optional[str] = typer.Option(None, "--land", metavar="MODE",
                                        help=f"Land mode, overriding the mission's: {', '.join(land_mode_names())}."),
+    sensor: Optional[str] = typer.Option(None, "--sensor", metavar="SENSOR",
+                                         help="Precision sensor of the cautious mode: irlock, marker or fused."),
+    fault: list[str] = typer.Option([], "--fault", metavar="SENSOR=FAULT",
+                                    help="Drop a sensor's values (repeatable, one per sensor): none, random:P, "
+                                         "periodic:KEEP:DROP, permanent, below:H, above:H; add :first-attempt "
+                                         "to limit it to the first landing attempt. E.g. marker=below:3."),
     seed: int = typer.Option(1, "--seed", help="Trial seed: same seed, same outcome."),
     takeoff_altitude_m: Optional[float] = typer.Option(
         None, "--takeoff-altitude-m", help="Take-off altitude above home in m, overriding the mission's."),
@@ -88,6 +113,7 @@ def fly(
 ) -> None:
     """Fly a mission once on the embedded simulator and print its outcome."""
     from .config.mission import load_mission
+    from .errors import SpecValueError
     from .runtime.embedded import TrialRequest, run_trial
 
     try:
@@ -100,9 +126,16 @@ def fly(
         raise fail(f"--takeoff-altitude-m: must be > 0 and <= 120 m, got {takeoff_altitude_m:g}")
     if seed < 0:
         raise fail(f"--seed: must be >= 0, got {seed}")
+    faults = _parse_faults(fault) if fault else None
+    request = TrialRequest(mission=mission, seed=seed, land_mode=land, sensor=sensor, faults=faults,
+                           takeoff_altitude_rel_m=takeoff_altitude_m, record_trajectory=False)
+    try:
+        request.resolved_mission()
+    except SpecValueError as error:
+        option = {"sensor": "--sensor", "mode": "--land"}.get(error.field, "--fault")
+        raise fail(f"{option}: {error.problem}") from None
 
-    outcome = run_trial(TrialRequest(mission=mission, seed=seed, land_mode=land,
-                                     takeoff_altitude_rel_m=takeoff_altitude_m, record_trajectory=False))
+    outcome = run_trial(request)
     data = outcome.to_dict(include_events=events)
     if as_json:
         typer.echo(json.dumps(data, sort_keys=True))
@@ -151,12 +184,11 @@ def pad_render(
 @app.command("modes")
 def modes() -> None:
     """List the land modes this version can fly."""
-    from .landing.registry import LAND_MODES
+    from .landing.registry import MODE_DESCRIPTIONS, create_land_strategy
 
     for name in land_mode_names():
-        strategy = LAND_MODES[name]()
-        doc = (type(strategy).__doc__ or "").strip().splitlines()[0]
-        typer.echo(f"{name:<10} scored from the {strategy.scoring_reference.value:<8} {doc}")
+        strategy = create_land_strategy(name)
+        typer.echo(f"{name:<10} scored from the {strategy.scoring_reference.value:<8} {MODE_DESCRIPTIONS[name]}")
 
 
 def main() -> None:

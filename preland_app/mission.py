@@ -62,8 +62,7 @@ class MissionRunner:
         self.rng = rng
         self.sensors = sensors
         self.takeoff_altitude_rel_m = (
-            takeoff_altitude_rel_m if takeoff_altitude_rel_m is not None
-            else spec.takeoff_altitude_rel_m(strategy.name)
+            takeoff_altitude_rel_m if takeoff_altitude_rel_m is not None else spec.takeoff_altitude_rel_m()
         )
         self.report = MissionReport()
         self._airborne = False

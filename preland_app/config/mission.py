@@ -13,8 +13,12 @@ import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..errors import SpecError, require
-from ..landing.registry import LAND_MODES, land_mode_names
+from ..errors import SpecError, SpecValueError, require
+from ..landing.base import LandStrategy
+from ..landing.cautious import CautiousSpec
+from ..landing.registry import LAND_MODES, PRECISION_SENSORS, create_land_strategy, land_mode_names, sensor_for
+from ..sensing.faults import SENSORS as FAULT_SENSORS
+from ..sensing.faults import FaultSpec, FaultSyntaxError
 from ..sim.params import ARDUCOPTER_PARAMS
 from ..sensing.pad import PAD_PRESETS, PadSpec, load_pad
 from ..sensing.spec import SensorsSpec
@@ -42,7 +46,8 @@ class PadPlacementSpec:
 
 @dataclass(frozen=True)
 class TakeoffSpec:
-    """Take-off altitude above home in m, optionally per land mode (thesis: 6 m for marker)."""
+    """Take-off altitude above home in m, optionally per land mode or precision sensor
+    (thesis: 6 m for the marker, which it cannot detect reliably from higher up)."""
 
     altitude_rel_m: float
     altitude_by_land_mode_rel_m: dict[str, float] = field(default_factory=dict)
@@ -51,13 +56,19 @@ class TakeoffSpec:
         require(0.0 < self.altitude_rel_m <= _MAX_ALTITUDE_M, "altitude_rel_m",
                 f"must be > 0 and <= {_MAX_ALTITUDE_M:g} m, got {self.altitude_rel_m:g}")
         for mode, altitude in self.altitude_by_land_mode_rel_m.items():
-            require(mode in LAND_MODES, f"altitude_by_land_mode_rel_m.{mode}",
-                    f"unknown land mode (expected one of: {', '.join(land_mode_names())})")
+            require(mode in LAND_MODES or mode in PRECISION_SENSORS, f"altitude_by_land_mode_rel_m.{mode}",
+                    f"unknown land mode or sensor (expected one of: {', '.join(land_mode_names())})")
             require(0.0 < altitude <= _MAX_ALTITUDE_M, f"altitude_by_land_mode_rel_m.{mode}",
                     f"must be > 0 and <= {_MAX_ALTITUDE_M:g} m, got {altitude:g}")
 
-    def altitude_for(self, land_mode: str) -> float:
-        return self.altitude_by_land_mode_rel_m.get(land_mode, self.altitude_rel_m)
+    def altitude_for(self, land_mode: str, sensor: str | None = None) -> float:
+        """The altitude for a land mode, else for its sensor, else the default."""
+        by = self.altitude_by_land_mode_rel_m
+        if land_mode in by:
+            return by[land_mode]
+        if sensor is not None and sensor in by:
+            return by[sensor]
+        return self.altitude_rel_m
 
 
 @dataclass(frozen=True)
@@ -84,13 +95,44 @@ class PathSpec:
 
 @dataclass(frozen=True)
 class LandSpec:
-    """How to land: the land mode's name (see `preland fly --help` for the list)."""
+    """How to land. `mode`: normal, irlock, marker, fused or cautious; `sensor`: the precision sensor of
+    the cautious mode (irlock, marker or fused; default marker); `faults`: per sensor (irlock, marker),
+    in the fault syntax (`random:0.75`, `below:3:first-attempt`...); `cautious`: the retry parameters."""
 
     mode: str = "normal"
+    sensor: str | None = None
+    faults: dict[str, str] = field(default_factory=dict)
+    cautious: CautiousSpec = field(default_factory=CautiousSpec)
 
     def __post_init__(self) -> None:
         require(self.mode in LAND_MODES, "mode",
                 f"unknown land mode {self.mode!r} (expected one of: {', '.join(land_mode_names())})")
+        if self.sensor is not None:
+            require(self.mode == "cautious", "sensor", "only the cautious mode takes a sensor (the others are one)")
+            require(self.sensor in PRECISION_SENSORS, "sensor",
+                    f"unknown sensor {self.sensor!r} (expected one of: {', '.join(PRECISION_SENSORS)})")
+        used = {None: (), "irlock": ("irlock",), "marker": ("marker",), "fused": ("irlock", "marker")}[
+            sensor_for(self.mode, self.sensor)]
+        for sensor, text in self.faults.items():
+            require(sensor in FAULT_SENSORS, f"faults.{sensor}",
+                    f"unknown sensor (expected one of: {', '.join(FAULT_SENSORS)})")
+            require(sensor in used, f"faults.{sensor}",
+                    f"land mode {self.mode!r} does not use the {sensor} sensor")
+            try:
+                FaultSpec.parse(text)
+            except FaultSyntaxError as error:
+                raise SpecValueError(f"faults.{sensor}", str(error)) from None
+
+    @property
+    def precision_sensor(self) -> str | None:
+        return sensor_for(self.mode, self.sensor)
+
+    def fault_specs(self) -> dict[str, FaultSpec]:
+        return {sensor: FaultSpec.parse(text) for sensor, text in self.faults.items()}
+
+    def strategy(self) -> LandStrategy:
+        return create_land_strategy(self.mode, sensor=self.sensor, faults=self.fault_specs(),
+                                    cautious=self.cautious if self.mode == "cautious" else None)
 
 
 @dataclass(frozen=True)
@@ -131,8 +173,8 @@ class MissionSpec:
         for name in self.params:
             require(name in ARDUCOPTER_PARAMS, f"params.{name}", "unknown autopilot parameter")
 
-    def takeoff_altitude_rel_m(self, land_mode: str | None = None) -> float:
-        return self.takeoff.altitude_for(land_mode or self.land.mode)
+    def takeoff_altitude_rel_m(self) -> float:
+        return self.takeoff.altitude_for(self.land.mode, self.land.precision_sensor)
 
     @property
     def base_dir(self) -> Path:
@@ -146,9 +188,15 @@ class MissionSpec:
         path = Path(preset)
         return load_pad(str(path if path.is_absolute() else self.base_dir / path))
 
-    def with_land_mode(self, land_mode: str) -> "MissionSpec":
-        """This mission with another land mode (validated)."""
-        return replace(self, land=LandSpec(mode=land_mode))
+    def with_land(self, *, mode: str | None = None, sensor: str | None = None,
+                  faults: dict[str, str] | None = None) -> "MissionSpec":
+        """This mission with another land mode, sensor or faults (validated like the file's)."""
+        land = self.land
+        new_mode = mode or land.mode
+        new_sensor = sensor if sensor is not None else (land.sensor if new_mode == "cautious" else None)
+        return replace(self, land=LandSpec(mode=new_mode, sensor=new_sensor,
+                                           faults=faults if faults is not None else dict(land.faults),
+                                           cautious=land.cautious))
 
 
 def load_mission(path: str | Path) -> MissionSpec:

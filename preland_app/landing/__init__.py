@@ -1,4 +1,4 @@
-"""Land modes (strategies): normal now; precision, cautious and the paper's algorithms plug in here."""
+"""Land modes (strategies): normal, the precision modes (irlock, marker, fused) and cautious."""
 
 from .base import LandingContext, LandingReport, LandStrategy, ScoringReference
 from .registry import LAND_MODES, create_land_strategy, land_mode_names

@@ -1,11 +1,13 @@
-"""Precision land modes `irlock`, `marker` and `fused`: companion-side sensing, onboard landing.
+"""Precision land modes `irlock`, `marker`, `fused` and `cautious`: companion-side sensing, onboard landing.
 
 The companion computer runs the sensors (IR-LOCK samples, camera frames through
-the marker detector, or both through the thesis' fused sensor) and sends every
-new value as a LANDING_TARGET through the Vehicle protocol. The autopilot's own
-precision landing (PLND_ENABLED=1, PLND_TYPE=1: companion) steers the LAND
-descent onto the target. PLND_STRICT=0: when the target is lost the descent
-goes on (the thesis' default operation, Section 6.1).
+the marker detector, or both through the thesis' fused sensor), drops values as
+the trial's faults say, and sends every remaining new value as a LANDING_TARGET
+through the Vehicle protocol. The autopilot's own precision landing
+(PLND_ENABLED=1, PLND_TYPE=1: companion) steers the LAND descent onto the
+target. The plain modes set PLND_STRICT=0 (the thesis' default operation: when
+the target is lost the descent goes on); `cautious` sets the retry parameters
+of its `CautiousSpec`.
 """
 
 from __future__ import annotations
@@ -14,18 +16,50 @@ import asyncio
 from collections import Counter
 
 from ..clock import wait_until
-from ..errors import PrelandError
+from ..errors import CommandDenied, PrelandError
+from ..sensing.faults import FaultCommand, FaultInjector, FaultSpec
 from ..sensing.fusion import FusedSensor
 from ..sensing.marker import choose_smallest, reading_from_detection
 from ..sensing.readings import TargetReading
 from ..vehicle.types import FlightMode
 from .base import LandingContext, LandingReport, ScoringReference
+from .cautious import CautiousSpec
 
-PRECLAND_PARAMS = {"PLND_ENABLED": 1, "PLND_TYPE": 1, "PLND_STRICT": 0}
+SENSORS = ("irlock", "marker", "fused")
+ATTEMPT_CLIMB_M = 0.5  # a climb this large during LAND means the autopilot started another attempt
+TELEMETRY_PERIOD_S = 0.1
 
 
 class MissingSensor(PrelandError):
     """A land mode needs a sensor the vehicle does not have."""
+
+
+class AttemptTracker:
+    """Counts landing attempts from telemetry alone: a climb of ATTEMPT_CLIMB_M during LAND starts a new
+    attempt; the next one can start only after the vehicle has descended again."""
+
+    def __init__(self) -> None:
+        self.attempt = 1
+        self._lowest_m: float | None = None
+        self._highest_m: float | None = None
+
+    def update(self, altitude_rel_m: float) -> bool:
+        """Feed the current altitude; True when a new attempt has just started."""
+        if self._highest_m is not None:  # climbing back up: wait for the descent to resume
+            if altitude_rel_m > self._highest_m:
+                self._highest_m = altitude_rel_m
+            elif altitude_rel_m < self._highest_m - ATTEMPT_CLIMB_M / 2:
+                self._highest_m = None
+                self._lowest_m = altitude_rel_m
+            return False
+        if self._lowest_m is None or altitude_rel_m < self._lowest_m:
+            self._lowest_m = altitude_rel_m
+            return False
+        if altitude_rel_m > self._lowest_m + ATTEMPT_CLIMB_M:
+            self.attempt += 1
+            self._highest_m = altitude_rel_m
+            return True
+        return False
 
 
 class PrecisionLanding:
@@ -33,13 +67,19 @@ class PrecisionLanding:
 
     scoring_reference = ScoringReference.PAD
 
-    def __init__(self, sensor: str) -> None:
-        if sensor not in ("irlock", "marker", "fused"):
-            raise ValueError(f"unknown precision sensor {sensor!r}")
-        self.name = sensor
+    def __init__(self, sensor: str, *, faults: dict[str, FaultSpec] | None = None,
+                 cautious: CautiousSpec | None = None) -> None:
+        if sensor not in SENSORS:
+            raise ValueError(f"unknown precision sensor {sensor!r} (expected one of: {', '.join(SENSORS)})")
         self.sensor = sensor
+        self.name = "cautious" if cautious is not None else sensor
+        self.cautious = cautious
+        self.faults = dict(faults or {})
         self.counts: Counter[str] = Counter()
+        self.injectors: dict[str, FaultInjector] = {}
+        self.attempts = AttemptTracker()
         self._fused: FusedSensor | None = None
+        self._height_m: float | None = None
 
     @property
     def uses_irlock(self) -> bool:
@@ -49,19 +89,48 @@ class PrecisionLanding:
     def uses_marker(self) -> bool:
         return self.sensor in ("marker", "fused")
 
+    def apply_fault_command(self, command: FaultCommand) -> None:
+        """The thesis' runtime fault command: change the faults of the targeted sensors."""
+        for sensor, spec in command.faults().items():
+            if sensor in self.injectors:
+                self.injectors[sensor].set_spec(spec)
+            self.faults[sensor] = spec
+
+    async def _configure(self, context: LandingContext) -> None:
+        vehicle = context.vehicle
+        params: dict[str, float] = {"PLND_ENABLED": 1, "PLND_TYPE": 1}
+        if self.cautious is None:
+            params["PLND_STRICT"] = 0
+        else:
+            params.update(self.cautious.ardupilot_params())
+        for name, value in params.items():
+            await vehicle.set_param(name, value)
+        if self.cautious is not None:
+            for name, value in self.cautious.embedded_params().items():
+                try:
+                    await vehicle.set_param(name, value)
+                except CommandDenied:
+                    # ArduPilot has no such parameter: its own retry behaviour applies.
+                    context.events.add("param_skipped", f"{name} not supported by this autopilot")
+
     async def land(self, context: LandingContext) -> LandingReport:
         vehicle, clock = context.vehicle, context.clock
         sensors = context.sensors
         if sensors is None or (self.uses_irlock and sensors.irlock is None) or (
                 self.uses_marker and (sensors.camera is None or sensors.marker_detector is None)):
-            raise MissingSensor(f"land mode {self.name!r} needs "
-                                + {"irlock": "an IR-LOCK", "marker": "a camera", "fused": "an IR-LOCK and a camera"}[
-                                    self.sensor])
-        for name, value in PRECLAND_PARAMS.items():
-            await vehicle.set_param(name, value)
+            need = {"irlock": "an IR-LOCK", "marker": "a camera", "fused": "an IR-LOCK and a camera"}[self.sensor]
+            raise MissingSensor(f"land mode {self.name!r} with sensor {self.sensor!r} needs {need}")
+        await self._configure(context)
+        streams = context.rng.spawn(2)
+        for sensor, stream in zip(("irlock", "marker"), streams):
+            used = (sensor == "irlock" and self.uses_irlock) or (sensor == "marker" and self.uses_marker)
+            if used:
+                self.injectors[sensor] = FaultInjector(sensor=sensor, spec=self.faults.get(sensor, FaultSpec()),
+                                                       rng=stream)
         if self.sensor == "fused":
             self._fused = FusedSensor(sensors.spec.fusion)
-        tasks = []
+        self._height_m = (await vehicle.telemetry()).height_above_ground_m
+        tasks = [asyncio.ensure_future(self._telemetry_loop(context))]
         if self.uses_irlock:
             tasks.append(asyncio.ensure_future(self._irlock_loop(context)))
         if self.uses_marker:
@@ -70,7 +139,8 @@ class PrecisionLanding:
             tasks.append(asyncio.ensure_future(self._fusion_loop(context)))
         try:
             await vehicle.set_mode(FlightMode.LAND)
-            context.events.add("land_command", f"LAND mode set with precision landing ({self.sensor})")
+            faults = ", ".join(f"{s} {f}" for s, f in sorted(self.faults.items()) if f.active) or "no faults"
+            context.events.add("land_command", f"LAND with precision landing ({self.name}, {self.sensor}; {faults})")
 
             async def disarmed() -> bool:
                 self._raise_if_failed(tasks)
@@ -78,7 +148,7 @@ class PrecisionLanding:
 
             async def describe() -> str:
                 t = await vehicle.telemetry()
-                return f"altitude {t.altitude_rel_m:.1f} m, {t.landed_state.name}"
+                return f"altitude {t.altitude_rel_m:.1f} m, {t.landed_state.name}, attempt {self.attempts.attempt}"
 
             await wait_until(disarmed, clock=clock, timeout_s=context.timeout_s, operation="land",
                              poll_period_s=context.poll_period_s, describe=describe)
@@ -87,10 +157,18 @@ class PrecisionLanding:
                 task.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
         context.events.add("disarmed", "landed and disarmed")
-        details = {f"{key}": value for key, value in sorted(self.counts.items())}
+        return LandingReport(details=self._details())
+
+    def _details(self) -> dict:
+        details: dict = {"sensor": self.sensor, "attempts": self.attempts.attempt}
+        details.update({key: value for key, value in sorted(self.counts.items())})
+        for sensor, injector in sorted(self.injectors.items()):
+            details[f"{sensor}_fault"] = str(injector.spec)
+            details[f"{sensor}_produced"] = injector.produced
+            details[f"{sensor}_dropped"] = injector.dropped
         if self._fused is not None:
             details.update({f"fused_{key}": value for key, value in self._fused.counts.items()})
-        return LandingReport(details=details)
+        return details
 
     @staticmethod
     def _raise_if_failed(tasks: list[asyncio.Future]) -> None:
@@ -98,9 +176,21 @@ class PrecisionLanding:
             if task.done() and not task.cancelled() and task.exception() is not None:
                 raise task.exception()
 
+    async def _telemetry_loop(self, context: LandingContext) -> None:
+        """Keep the height the faults gate on, and count attempts."""
+        while True:
+            t = await context.vehicle.telemetry()
+            self._height_m = t.height_above_ground_m
+            if t.mode is FlightMode.LAND and self.attempts.update(t.altitude_rel_m):
+                context.events.add("attempt", f"landing attempt {self.attempts.attempt} started",
+                                   attempt=self.attempts.attempt, altitude_rel_m=round(t.altitude_rel_m, 2))
+            await context.clock.sleep(TELEMETRY_PERIOD_S)
+
     async def _deliver(self, context: LandingContext, reading: TargetReading) -> None:
-        """A new sensor value: to the fused sensor, or straight to the autopilot."""
-        self.counts[f"{reading.sensor}_values"] += 1
+        """A new sensor value: through the fault injector, then to the fused sensor or the autopilot."""
+        injector = self.injectors.get(reading.sensor)
+        if injector is not None and not injector.admit(height_m=self._height_m, attempt=self.attempts.attempt):
+            return
         if self._fused is not None:
             self._fused.offer(reading)
             return

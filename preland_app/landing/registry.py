@@ -2,28 +2,45 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
+from ..sensing.faults import FaultSpec
 from .base import LandStrategy
+from .cautious import CautiousSpec
 from .normal import NormalLanding
-from .precision import PrecisionLanding
+from .precision import SENSORS, PrecisionLanding
 
-LAND_MODES: dict[str, Callable[[], LandStrategy]] = {
-    "normal": NormalLanding,
-    "irlock": lambda: PrecisionLanding("irlock"),
-    "marker": lambda: PrecisionLanding("marker"),
-    "fused": lambda: PrecisionLanding("fused"),
+LAND_MODES = ("normal", "irlock", "marker", "fused", "cautious")
+PRECISION_SENSORS = SENSORS
+DEFAULT_CAUTIOUS_SENSOR = "marker"  # the thesis' cautious trials (Table 5) use the marker
+
+MODE_DESCRIPTIONS = {
+    "normal": "the autopilot's LAND on GPS alone",
+    "irlock": "LAND with precision landing on the IR-LOCK (angles only, height from the rangefinder)",
+    "marker": "LAND with precision landing on ArUco marker detections (angles and distance)",
+    "fused": "LAND with precision landing on the fused IR-LOCK + marker sensor",
+    "cautious": "precision landing that retries when the target is lost (--sensor irlock|marker|fused)",
 }
 
 
 def land_mode_names() -> list[str]:
-    return sorted(LAND_MODES)
+    return list(LAND_MODES)
 
 
-def create_land_strategy(name: str) -> LandStrategy:
-    """A fresh strategy for `name`; raises KeyError naming the known modes."""
-    try:
-        factory = LAND_MODES[name]
-    except KeyError:
-        raise KeyError(f"unknown land mode {name!r} (expected one of: {', '.join(land_mode_names())})") from None
-    return factory()
+def sensor_for(mode: str, sensor: str | None) -> str | None:
+    """The precision sensor a land mode uses (None for normal)."""
+    if mode == "normal":
+        return None
+    if mode == "cautious":
+        return sensor or DEFAULT_CAUTIOUS_SENSOR
+    return mode
+
+
+def create_land_strategy(mode: str, *, sensor: str | None = None, faults: dict[str, FaultSpec] | None = None,
+                         cautious: CautiousSpec | None = None) -> LandStrategy:
+    """A fresh strategy for land mode `mode`; raises KeyError naming the known modes."""
+    if mode not in LAND_MODES:
+        raise KeyError(f"unknown land mode {mode!r} (expected one of: {', '.join(LAND_MODES)})")
+    if mode == "normal":
+        return NormalLanding()
+    if mode == "cautious":
+        return PrecisionLanding(sensor_for(mode, sensor), faults=faults, cautious=cautious or CautiousSpec())
+    return PrecisionLanding(mode, faults=faults)

@@ -11,7 +11,6 @@ from ..config.mission import MissionSpec
 from ..errors import MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
 from ..events import EventLog
 from ..landing.base import ScoringReference
-from ..landing.registry import create_land_strategy
 from ..mission import MissionReport, MissionRunner
 from ..outcome import Outcome, TrialOutcome, score_touchdown
 from ..sim.noise import child_rng
@@ -28,13 +27,21 @@ from .recorder import TrajectoryRecorder
 
 @dataclass(frozen=True)
 class TrialRequest:
-    """One trial: a mission, a seed, and optional overrides of its land mode and take-off altitude."""
+    """One trial: a mission, a seed, and optional overrides of its land mode, sensor, faults
+    (sensor -> fault syntax) and take-off altitude."""
 
     mission: MissionSpec
     seed: int
     land_mode: str | None = None
+    sensor: str | None = None
+    faults: dict[str, str] | None = None
     takeoff_altitude_rel_m: float | None = None
     record_trajectory: bool = True
+
+    def resolved_mission(self) -> MissionSpec:
+        if self.land_mode is None and self.sensor is None and self.faults is None:
+            return self.mission
+        return self.mission.with_land(mode=self.land_mode, sensor=self.sensor, faults=self.faults)
 
 
 def run_trial(request: TrialRequest) -> TrialOutcome:
@@ -43,8 +50,8 @@ def run_trial(request: TrialRequest) -> TrialOutcome:
 
 
 async def fly_embedded(request: TrialRequest) -> TrialOutcome:
-    mission = request.mission if request.land_mode is None else request.mission.with_land_mode(request.land_mode)
-    strategy = create_land_strategy(mission.land.mode)
+    mission = request.resolved_mission()
+    strategy = mission.land.strategy()
     clock = LoopClock()
     simulator = Simulator(seed=request.seed, environment=mission.environment,
                           initial_yaw_deg=mission.initial_yaw_deg)

@@ -28,6 +28,7 @@ from .dynamics import ActuatorDemand
 from .navigation import NavEstimate
 from .params import ParameterTable
 from .precland import PrecisionLandingEstimator
+from .precland_retry import Action, LandingRetry
 
 LAND_DETECTOR_TRIGGER_S = 1.0  # ArduCopter LAND_DETECTOR_TRIGGER_SEC
 LAND_DETECTOR_MAYBE_TRIGGER_S = 0.2  # LAND_DETECTOR_MAYBE_TRIGGER_SEC
@@ -79,7 +80,10 @@ class Autopilot:
         self.messages: list[StatusText] = []
         self.landing_targets_received = 0
         self.precland = PrecisionLandingEstimator(params)
+        self.retry = LandingRetry(params)
         self._precland_active = False
+        self._retry_hold: tuple[float, float, float] | None = None
+        self._retry_messages_seen = 0
         self.nav: NavEstimate | None = None
         self.yaw_rad = initial_yaw_rad
         self.roll_rad = 0.0
@@ -182,6 +186,8 @@ class Autopilot:
         elif mode in (FlightMode.LOITER, FlightMode.LAND):
             self._hold_here()
             self._precland_active = False
+            self.retry.reset()
+            self._retry_hold = None
         elif mode is FlightMode.RTL:
             self._rtl_stage = RtlStage.CLIMB
             self._rtl_stage_time_s = self._now_s
@@ -268,9 +274,12 @@ class Autopilot:
         self.roll_rad = roll_rad
         self.pitch_rad = pitch_rad
         if self.precland_enabled():
+            self.precland.predict(dt_s=dt_s, delta_velocity_ned_m_s=(nav.delta_velocity_north_m_s,
+                                                                     nav.delta_velocity_east_m_s))
             self.precland.record_pose(now_s, north_m=nav.north_m, east_m=nav.east_m,
-                                      height_m=self.height_above_ground_m(), roll_rad=self.roll_rad,
-                                      pitch_rad=self.pitch_rad, yaw_rad=yaw_rad)
+                                      height_m=self.height_above_ground_m(),
+                                      roll_rad=self.roll_rad + nav.roll_error_rad,
+                                      pitch_rad=self.pitch_rad + nav.pitch_error_rad, yaw_rad=yaw_rad)
         if not self.armed:
             self.last_climb_demand_m_s = 0.0
             return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
@@ -322,15 +331,17 @@ class Autopilot:
 
     def _fly_to(self, dt_s: float, nav: NavEstimate, north_m: float | None, east_m: float | None,
                 down_m: float | None, *, speed_max_m_s: float, climb_rate_m_s: float | None = None,
-                velocity_ff: tuple[float, float] = (0.0, 0.0)) -> ActuatorDemand:
+                velocity_ff: tuple[float, float] = (0.0, 0.0),
+                velocity_feedback: tuple[float, float] | None = None) -> ActuatorDemand:
         p = self.params
+        velocity_north, velocity_east = velocity_feedback or (nav.velocity_north_m_s, nav.velocity_east_m_s)
         roll, pitch = self._xy.update(
             dt_s=dt_s,
             yaw_rad=self.yaw_rad,
             est_north_m=nav.north_m,
             est_east_m=nav.east_m,
-            est_velocity_north_m_s=nav.velocity_north_m_s,
-            est_velocity_east_m_s=nav.velocity_east_m_s,
+            est_velocity_north_m_s=velocity_north,
+            est_velocity_east_m_s=velocity_east,
             target_north_m=north_m,
             target_east_m=east_m,
             velocity_ff_north_m_s=velocity_ff[0],
@@ -399,7 +410,29 @@ class Autopilot:
     def _run_land(self, dt_s: float, nav: NavEstimate, north_m: float, east_m: float) -> ActuatorDemand:
         climb_rate = self.land_descent_rate_m_s()
         if self.precland_enabled():
-            target = self.precland.target_position_m(self._now_s)
+            target = self.precland.target_position_m(self._now_s, vehicle_north_m=nav.north_m,
+                                                     vehicle_east_m=nav.east_m)
+            if target is not None:
+                self.retry.note_target(vehicle_ned_m=(nav.north_m, nav.east_m, nav.down_m), target_ne_m=target)
+            directive = self.retry.update(now_s=self._now_s, target_found=target is not None,
+                                          vehicle_ned_m=(nav.north_m, nav.east_m, nav.down_m),
+                                          height_m=self.height_above_ground_m(),
+                                          rangefinder_valid=self.rangefinder_alt_ok(), home_down_m=self.home_down_m)
+            for text in self.retry.messages[self._retry_messages_seen:]:
+                self._say(text)
+            self._retry_messages_seen = len(self.retry.messages)
+            if directive.action is Action.GOTO:
+                self._retry_hold = None
+                self._precland_active = False
+                return self._fly_to(dt_s, nav, directive.north_m, directive.east_m, directive.down_m,
+                                    speed_max_m_s=self.params.m_s("WPNAV_SPEED"))
+            if directive.action is Action.HOLD:
+                self._precland_active = False
+                if self._retry_hold is None:
+                    stop_n, stop_e = self._stopping_point()
+                    self._retry_hold = (stop_n, stop_e, nav.down_m)
+                return self._fly_to(dt_s, nav, *self._retry_hold, speed_max_m_s=self.params.m_s("LOIT_SPEED"))
+            self._retry_hold = None
             if target is not None:
                 if not self._precland_active:
                     self._say("PrecLand: target acquired")
@@ -407,7 +440,13 @@ class Autopilot:
                 north_m, east_m = target
                 self._target_north_m, self._target_east_m = target
                 climb_rate = self._precland_descent_rate_m_s(nav, target, climb_rate)
-            elif self._precland_active:
+                # ArduCopter 3.6/4.0 (the thesis' autopilot) feeds the xy velocity loop with the
+                # estimator's target-relative velocity instead of the EKF's (override_vehicle_velocity_xy).
+                relative_velocity = self.precland.relative_velocity_m_s(self._now_s)
+                feedback = None if relative_velocity is None else (-relative_velocity[0], -relative_velocity[1])
+                return self._fly_to(dt_s, nav, north_m, east_m, None, speed_max_m_s=self.params.m_s("LOIT_SPEED"),
+                                    climb_rate_m_s=climb_rate, velocity_feedback=feedback)
+            if self._precland_active:
                 # Target lost: hold where we are and keep descending (PLND_STRICT=0 behaviour).
                 self._precland_active = False
                 self._say("PrecLand: target lost")

@@ -33,6 +33,10 @@ class NavEstimate:
     rangefinder_m: float | None
     gps_error_north_m: float
     gps_error_east_m: float
+    roll_error_rad: float = 0.0
+    pitch_error_rad: float = 0.0
+    delta_velocity_north_m_s: float = 0.0
+    delta_velocity_east_m_s: float = 0.0
 
 
 class NavigationModel:
@@ -53,8 +57,12 @@ class NavigationModel:
         self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
         self._baro_drift = GaussMarkov(sigma=spec.baro_drift_sigma_m, tau_s=spec.baro_drift_tau_s, noise=noise)
         self._baro_noise = GaussMarkov(sigma=spec.baro_noise_sigma_m, tau_s=_BARO_NOISE_TAU_S, noise=noise)
+        attitude_sigma = math.radians(spec.attitude_noise_sigma_deg)
+        self._roll_error = GaussMarkov(sigma=attitude_sigma, tau_s=spec.attitude_noise_tau_s, noise=noise)
+        self._pitch_error = GaussMarkov(sigma=attitude_sigma, tau_s=spec.attitude_noise_tau_s, noise=noise)
         # The EKF's height origin is set at boot, so only the baro's change since then counts.
         self._baro_origin_m = self._baro_drift.value + self._baro_noise.value
+        self._previous_velocity: tuple[float, float] | None = None
         self.elapsed_s = 0.0
 
     def step(self, *, dt_s: float, north_m: float, east_m: float, down_m: float,
@@ -67,6 +75,12 @@ class NavigationModel:
         error_down = -(self._baro_drift.step(dt_s) + self._baro_noise.step(dt_s) - self._baro_origin_m)
         velocity_sigma = spec.velocity_noise_sigma_m_s
         noise = self._noise
+        # IMU delta-velocity over the step (true change plus accelerometer noise).
+        previous = self._previous_velocity or (velocity_ned_m_s[0], velocity_ned_m_s[1])
+        self._previous_velocity = (velocity_ned_m_s[0], velocity_ned_m_s[1])
+        accel_noise = spec.imu_accel_noise_m_s2 * dt_s
+        delta_north = velocity_ned_m_s[0] - previous[0] + accel_noise * noise.next()
+        delta_east = velocity_ned_m_s[1] - previous[1] + accel_noise * noise.next()
         rangefinder_m = None
         if spec.rangefinder_present:
             height_m = -down_m
@@ -84,6 +98,10 @@ class NavigationModel:
             rangefinder_m=rangefinder_m,
             gps_error_north_m=error_north,
             gps_error_east_m=error_east,
+            roll_error_rad=self._roll_error.step(dt_s),
+            pitch_error_rad=self._pitch_error.step(dt_s),
+            delta_velocity_north_m_s=delta_north,
+            delta_velocity_east_m_s=delta_east,
         )
 
 

@@ -64,6 +64,12 @@ ARDUCOPTER_PARAMS: dict[str, ParamInfo] = {
     "PLND_ALT_MIN": ParamInfo(0.75, "m", "below this the target is not required", 0, 5),
     "PLND_ALT_MAX": ParamInfo(8, "m", "above this retries climb no further", 0, 50),
     "PLND_OPTIONS": ParamInfo(0, "", "precision landing options bitmask", 0, 7),
+    # preland's embedded autopilot only (ArduPilot has no such parameters): the thesis' cautious
+    # landing as options of the retry state machine (see sim/precland_retry.py).
+    "PRL_LOST_HOLD": ParamInfo(0, "", "target lost: 0 keep descending for PLND_TIMEOUT (ArduPilot), 1 hold (thesis)",
+                               0, 1),
+    "PRL_RET_ALT": ParamInfo(0, "m", "thesis default retry height above home (0: ArduPilot's retry)", 0, 100),
+    "PRL_FS_HOLD": ParamInfo(7, "s", "hover before the blind descent once retries are spent (ArduPilot: 7)", 0, 60),
     # Arming.
     "ARMING_CHECK": ParamInfo(1, "", "arming checks bitmask (0: none)", 0, 1048575),
 }

@@ -1,14 +1,18 @@
 """Onboard precision landing, after ArduPilot's AC_PrecLand with a companion source (PLND_TYPE=1).
 
 LANDING_TARGET angles are turned into a line of sight in body FRD,
-(-tan(angle_y), tan(angle_x), 1), rotated to NED with the attitude at the
-measurement's capture time, and scaled by the measured distance or, without
-one, by the height above ground (rangefinder, else barometer). The target's
-position in the autopilot's (estimated) NED frame is then either the raw
-measurement (PLND_EST_TYPE=0) or a per-axis position/velocity Kalman filter
-(PLND_EST_TYPE=1) with PLND_ACC_P_NSE process noise and ArduPilot's
-measurement noise (0.01 of the height plus 2 cm). Measurements older than 1 s
-are dropped; the target counts as lost 2 s after the last one.
+(-tan(angle_y), tan(angle_x), 1), rotated to NED with the attitude estimate at
+the measurement's capture time, and scaled by the measured distance or, without
+one, by the height above ground (rangefinder, else barometer). The result is the
+target's position *relative to the vehicle*, moved to the present with the
+vehicle's motion since the capture. As in ArduPilot, the estimator works in that
+relative frame: PLND_EST_TYPE=1 is a per-axis position/velocity Kalman filter
+predicted with the IMU's delta-velocity (PLND_ACC_P_NSE) and corrected with the
+measurements (noise 1 % of the height plus 2 cm); PLND_EST_TYPE=0 uses the raw
+measurement. The target's position for the controller is the vehicle's position
+estimate plus the relative estimate, so GPS noise does not move the target.
+Measurements older than 1 s are dropped; the target counts as lost 2 s after the
+last one.
 """
 
 from __future__ import annotations
@@ -37,22 +41,21 @@ class _PoseSample:
 
 
 class _AxisFilter:
-    """Constant-velocity Kalman filter on one horizontal axis (position m, velocity m/s)."""
+    """AC_PrecLand's PosVelEKF on one horizontal axis: relative position (m) and velocity (m/s)."""
 
     __slots__ = ("position", "velocity", "p00", "p01", "p11")
 
     def __init__(self, position: float, variance: float) -> None:
         self.position = position
         self.velocity = 0.0
-        self.p00, self.p01, self.p11 = variance, 0.0, 1.0
+        self.p00, self.p01, self.p11 = variance, 0.0, 1.0  # ArduPilot starts with 1 (m/s)^2 on velocity
 
-    def predict(self, dt_s: float, accel_noise: float) -> None:
+    def predict(self, dt_s: float, delta_velocity: float, delta_velocity_noise: float) -> None:
         self.position += self.velocity * dt_s
-        q = accel_noise * accel_noise
-        dt2 = dt_s * dt_s
-        p00 = self.p00 + dt_s * (2.0 * self.p01 + dt_s * self.p11) + q * dt2 * dt2 / 4.0
-        p01 = self.p01 + dt_s * self.p11 + q * dt2 * dt_s / 2.0
-        p11 = self.p11 + q * dt2
+        self.velocity += delta_velocity
+        p00 = self.p00 + dt_s * (2.0 * self.p01 + dt_s * self.p11)
+        p01 = self.p01 + dt_s * self.p11
+        p11 = self.p11 + delta_velocity_noise * delta_velocity_noise
         self.p00, self.p01, self.p11 = p00, p01, p11
 
     def update(self, measurement: float, variance: float) -> None:
@@ -67,22 +70,21 @@ class _AxisFilter:
 
 
 class PrecisionLandingEstimator:
-    """Tracks the landing target from LANDING_TARGET messages. Positions NED (autopilot's estimate frame), m."""
+    """Tracks the landing target from LANDING_TARGET messages. NED, metres, the autopilot's estimate frame."""
 
     def __init__(self, params: ParameterTable) -> None:
         self.params = params
         self._history: deque[_PoseSample] = deque()
         self._filters: tuple[_AxisFilter, _AxisFilter] | None = None
-        self._raw: tuple[float, float] | None = None
+        self._raw_rel: tuple[float, float] | None = None
         self._last_update_s: float | None = None
-        self._last_predict_s: float | None = None
         self.last_measured_height_m: float | None = None
         self.measurements_used = 0
         self.measurements_dropped = 0
 
     def reset(self) -> None:
         self._filters = None
-        self._raw = None
+        self._raw_rel = None
         self._last_update_s = None
 
     def record_pose(self, sample_time_s: float, *, north_m: float, east_m: float, height_m: float,
@@ -100,13 +102,22 @@ class PrecisionLandingEstimator:
                 break
         return best
 
+    def predict(self, *, dt_s: float, delta_velocity_ned_m_s: tuple[float, float]) -> None:
+        """Propagate the relative estimate with the vehicle's IMU delta-velocity over `dt_s`."""
+        if self._filters is None:
+            return
+        noise = self.params.value("PLND_ACC_P_NSE") * dt_s
+        self._filters[0].predict(dt_s, -delta_velocity_ned_m_s[0], noise)
+        self._filters[1].predict(dt_s, -delta_velocity_ned_m_s[1], noise)
+
     def handle(self, now_s: float, target: LandingTarget) -> bool:
         """Fuse one measurement; False when it was dropped (stale, or pointing above the horizon)."""
         if now_s - target.timestamp_s > MEASUREMENT_MAX_AGE_S:
             self.measurements_dropped += 1
             return False
         pose = self._pose_at(target.timestamp_s)
-        if pose is None:
+        current = self._history[-1] if self._history else None
+        if pose is None or current is None:
             self.measurements_dropped += 1
             return False
         forward, right, down = -math.tan(target.angle_y_rad), math.tan(target.angle_x_rad), 1.0
@@ -123,42 +134,43 @@ class PrecisionLandingEstimator:
             scale = target.distance_m / math.sqrt(north * north + east * east + downward * downward)
         else:
             scale = max(pose.height_m, 0.0) / downward
-        rel_north, rel_east, rel_down = north * scale, east * scale, downward * scale
-        target_north, target_east = pose.north_m + rel_north, pose.east_m + rel_east
+        # Relative position at capture, moved to now by the vehicle's motion since then.
+        rel_north = north * scale - (current.north_m - pose.north_m)
+        rel_east = east * scale - (current.east_m - pose.east_m)
+        rel_down = downward * scale
         self.last_measured_height_m = rel_down
-        self._raw = (target_north, target_east)
-        noise_m = 0.01 * rel_down + 0.02  # AC_PrecLand's xy measurement noise
-        if self._filters is None or self._last_update_s is None or \
-                now_s - self._last_update_s > TARGET_LOST_AFTER_S:
-            self._filters = (_AxisFilter(target_north, noise_m**2), _AxisFilter(target_east, noise_m**2))
-            self._last_predict_s = now_s
+        self._raw_rel = (rel_north, rel_east)
+        variance = (0.01 * rel_down + 0.02) ** 2  # AC_PrecLand's xy measurement noise
+        if self._filters is None or not self.target_acquired(now_s):
+            self._filters = (_AxisFilter(rel_north, variance), _AxisFilter(rel_east, variance))
         else:
-            self._predict(now_s)
-            self._filters[0].update(target_north, noise_m**2)
-            self._filters[1].update(target_east, noise_m**2)
+            self._filters[0].update(rel_north, variance)
+            self._filters[1].update(rel_east, variance)
         self._last_update_s = now_s
         self.measurements_used += 1
         return True
 
-    def _predict(self, now_s: float) -> None:
-        if self._filters is None or self._last_predict_s is None:
-            return
-        dt_s = now_s - self._last_predict_s
-        if dt_s <= 0:
-            return
-        accel_noise = self.params.value("PLND_ACC_P_NSE")
-        self._filters[0].predict(dt_s, accel_noise)
-        self._filters[1].predict(dt_s, accel_noise)
-        self._last_predict_s = now_s
-
     def target_acquired(self, now_s: float) -> bool:
         return self._last_update_s is not None and now_s - self._last_update_s <= TARGET_LOST_AFTER_S
 
-    def target_position_m(self, now_s: float) -> tuple[float, float] | None:
-        """The target's (north, east) in the autopilot's NED frame, or None when not acquired."""
+    def relative_position_m(self, now_s: float) -> tuple[float, float] | None:
+        """Target minus vehicle (north, east) in m, or None when not acquired."""
         if not self.target_acquired(now_s):
             return None
         if self.params.value("PLND_EST_TYPE") == 0 or self._filters is None:
-            return self._raw
-        self._predict(now_s)
+            return self._raw_rel
         return self._filters[0].position, self._filters[1].position
+
+    def relative_velocity_m_s(self, now_s: float) -> tuple[float, float] | None:
+        """Target minus vehicle velocity (north, east) in m/s from the filter; None for the raw estimator."""
+        if self.params.value("PLND_EST_TYPE") == 0 or self._filters is None or not self.target_acquired(now_s):
+            return None
+        return self._filters[0].velocity, self._filters[1].velocity
+
+    def target_position_m(self, now_s: float, *, vehicle_north_m: float,
+                          vehicle_east_m: float) -> tuple[float, float] | None:
+        """The target's (north, east) in the autopilot's NED frame, or None when not acquired."""
+        rel = self.relative_position_m(now_s)
+        if rel is None:
+            return None
+        return vehicle_north_m + rel[0], vehicle_east_m + rel[1]

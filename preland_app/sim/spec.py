@@ -43,7 +43,10 @@ class NavigationSpec:
     low-pass filtered with `gps_drift_smooth_s` so it wanders smoothly) plus
     fast noise (`position_noise_sigma_m`, time constant 1 s). Barometric
     altitude drifts (`baro_drift_sigma_m`, `baro_drift_tau_s`) and is noisy; the
-    downward rangefinder is accurate within its range.
+    downward rangefinder is accurate within its range. The attitude estimate
+    (roll and pitch) wanders around the truth (`attitude_noise_sigma_deg`,
+    time constant `attitude_noise_tau_s`: vibration and EKF error), which is
+    what turns a camera or IR-LOCK angle into a position error h * tan(error).
     """
 
     gps_drift_sigma_m: float = 0.75
@@ -57,6 +60,9 @@ class NavigationSpec:
     baro_noise_sigma_m: float = 0.05
     rangefinder_noise_sigma_m: float = 0.02
     rangefinder_present: bool = True
+    attitude_noise_sigma_deg: float = 0.7
+    attitude_noise_tau_s: float = 0.5
+    imu_accel_noise_m_s2: float = 0.1
 
     def __post_init__(self) -> None:
         for name in (
@@ -67,11 +73,14 @@ class NavigationSpec:
             "baro_drift_sigma_m",
             "baro_noise_sigma_m",
             "rangefinder_noise_sigma_m",
+            "attitude_noise_sigma_deg",
+            "imu_accel_noise_m_s2",
         ):
             _require(getattr(self, name) >= 0, name, "must be >= 0")
         _require(self.gps_drift_tau_s > 0, "gps_drift_tau_s", "must be > 0")
         _require(self.gps_drift_smooth_s > 0, "gps_drift_smooth_s", "must be > 0")
         _require(self.baro_drift_tau_s > 0, "baro_drift_tau_s", "must be > 0")
+        _require(self.attitude_noise_tau_s > 0, "attitude_noise_tau_s", "must be > 0")
 
 
 @dataclass(frozen=True)

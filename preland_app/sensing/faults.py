@@ -1,0 +1,209 @@
+"""Fault injection: sensor values dropped on purpose (thesis Chapter 7 and Section 8.2.3).
+
+Faults only ever drop values, never distort them, and apply per sensor before
+fusion. Kinds:
+
+* `none`; `random:P` (drop each new value with probability P);
+* `periodic:KEEP:DROP` (keep KEEP values, drop DROP, repeat);
+* `permanent` (drop everything);
+* `below:H` / `above:H` (drop while the height above the target, as the vehicle
+  knows it, is <= H or >= H metres);
+
+each optionally suffixed `:first-attempt` to apply during the first landing
+attempt only (the thesis' Table 5 removes the failure on the second attempt).
+
+`FaultCommand` is the thesis' fault-injection message (its Table 1) with its
+documented rules; it converts to per-sensor `FaultSpec`s.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+SENSORS = ("irlock", "marker")
+FIRST_ATTEMPT_SUFFIX = "first-attempt"
+
+
+class FaultKind(enum.Enum):
+    NONE = "none"
+    RANDOM = "random"
+    PERIODIC = "periodic"
+    PERMANENT = "permanent"
+    BELOW = "below"
+    ABOVE = "above"
+
+
+class FaultSyntaxError(ValueError):
+    """A fault string that does not parse; the message says what is expected."""
+
+
+FAULT_SYNTAX = "none, random:P, periodic:KEEP:DROP, permanent, below:H or above:H, optionally with :first-attempt"
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """One sensor's fault. `probability` for random; `keep`/`drop` counts for periodic; `height_m` for below/above."""
+
+    kind: FaultKind = FaultKind.NONE
+    probability: float = 0.0
+    keep: int = 0
+    drop: int = 0
+    height_m: float = 0.0
+    first_attempt_only: bool = False
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.probability <= 1.0:
+            raise FaultSyntaxError(f"probability must be within 0..1, got {self.probability:g}")
+        if self.keep < 0 or self.drop < 0:
+            raise FaultSyntaxError("periodic counts must be >= 0")
+        if self.kind is FaultKind.PERIODIC and self.keep == 0 and self.drop == 0:
+            raise FaultSyntaxError("periodic needs KEEP or DROP > 0")
+        if self.kind in (FaultKind.BELOW, FaultKind.ABOVE) and self.height_m < 0:
+            raise FaultSyntaxError(f"height must be >= 0 m, got {self.height_m:g}")
+
+    @classmethod
+    def parse(cls, text: str) -> "FaultSpec":
+        """Parse the CLI/spec syntax (see FAULT_SYNTAX)."""
+        parts = [p.strip() for p in str(text).strip().lower().split(":")]
+        first_attempt = False
+        if len(parts) > 1 and parts[-1] == FIRST_ATTEMPT_SUFFIX:
+            first_attempt = True
+            parts = parts[:-1]
+        name, args = parts[0], parts[1:]
+        try:
+            kind = FaultKind(name)
+        except ValueError:
+            raise FaultSyntaxError(f"unknown fault {text!r} (expected {FAULT_SYNTAX})") from None
+        expected = {FaultKind.NONE: 0, FaultKind.PERMANENT: 0, FaultKind.RANDOM: 1, FaultKind.PERIODIC: 2,
+                     FaultKind.BELOW: 1, FaultKind.ABOVE: 1}[kind]
+        if len(args) != expected:
+            raise FaultSyntaxError(f"fault {text!r}: {kind.value} takes {expected} value(s) (expected {FAULT_SYNTAX})")
+        try:
+            if kind is FaultKind.RANDOM:
+                return cls(kind, probability=float(args[0]), first_attempt_only=first_attempt)
+            if kind is FaultKind.PERIODIC:
+                return cls(kind, keep=int(args[0]), drop=int(args[1]), first_attempt_only=first_attempt)
+            if kind in (FaultKind.BELOW, FaultKind.ABOVE):
+                return cls(kind, height_m=float(args[0]), first_attempt_only=first_attempt)
+        except ValueError as error:
+            if isinstance(error, FaultSyntaxError):
+                raise
+            raise FaultSyntaxError(f"fault {text!r}: {error}") from None
+        return cls(kind, first_attempt_only=first_attempt)
+
+    def __str__(self) -> str:
+        text = {
+            FaultKind.NONE: "none",
+            FaultKind.PERMANENT: "permanent",
+            FaultKind.RANDOM: f"random:{self.probability:g}",
+            FaultKind.PERIODIC: f"periodic:{self.keep}:{self.drop}",
+            FaultKind.BELOW: f"below:{self.height_m:g}",
+            FaultKind.ABOVE: f"above:{self.height_m:g}",
+        }[self.kind]
+        return text + (f":{FIRST_ATTEMPT_SUFFIX}" if self.first_attempt_only else "")
+
+    @property
+    def active(self) -> bool:
+        return self.kind is not FaultKind.NONE
+
+
+class FaultTarget(enum.IntEnum):
+    """The fault command's `target` field (thesis Table 1)."""
+
+    IRLOCK = 1
+    MARKER = 2
+    BOTH = 3
+
+
+@dataclass(frozen=True)
+class FaultCommand:
+    """The thesis' fault-injection message: target (1 IR-LOCK, 2 marker, 3 both), r_drop, p_keep, p_drop.
+
+    Rules (thesis Section 7.2): r_drop > 0 selects random drops with that
+    probability and the other fields are ignored (so r_drop = 1.0 is a
+    permanent failure); r_drop = 0 selects periodic drops with p_keep/p_drop
+    (p_keep = 0 with p_drop > 0 is a permanent failure); all fields zero turn
+    fault injection off for the target.
+    """
+
+    target: FaultTarget
+    r_drop: float = 0.0
+    p_keep: int = 0
+    p_drop: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.target, FaultTarget):
+            object.__setattr__(self, "target", FaultTarget(int(self.target)))
+        if not 0.0 <= self.r_drop <= 1.0:
+            raise FaultSyntaxError(f"r_drop must be within 0..1, got {self.r_drop:g}")
+        if not (0 <= self.p_keep <= 65535 and 0 <= self.p_drop <= 65535):
+            raise FaultSyntaxError("p_keep and p_drop are uint16 (0..65535)")
+
+    def fault(self) -> FaultSpec:
+        if self.r_drop >= 1.0:
+            return FaultSpec(FaultKind.PERMANENT)
+        if self.r_drop > 0.0:
+            return FaultSpec(FaultKind.RANDOM, probability=self.r_drop)
+        if self.p_keep == 0 and self.p_drop == 0:
+            return FaultSpec(FaultKind.NONE)
+        if self.p_keep == 0:
+            return FaultSpec(FaultKind.PERMANENT)
+        if self.p_drop == 0:
+            return FaultSpec(FaultKind.NONE)
+        return FaultSpec(FaultKind.PERIODIC, keep=self.p_keep, drop=self.p_drop)
+
+    def targets(self) -> tuple[str, ...]:
+        return {FaultTarget.IRLOCK: ("irlock",), FaultTarget.MARKER: ("marker",),
+                FaultTarget.BOTH: ("irlock", "marker")}[self.target]
+
+    def faults(self) -> dict[str, FaultSpec]:
+        """The per-sensor faults this command sets."""
+        return {sensor: self.fault() for sensor in self.targets()}
+
+
+class FaultInjector:
+    """Applies one FaultSpec to a stream of new values from one sensor; counts what it keeps and drops."""
+
+    def __init__(self, *, sensor: str, spec: FaultSpec, rng: np.random.Generator) -> None:
+        self.sensor = sensor
+        self.spec = spec
+        self._rng = rng
+        self._phase = 0
+        self.produced = 0
+        self.dropped = 0
+
+    def set_spec(self, spec: FaultSpec) -> None:
+        """Change the fault at runtime (the fault command); the periodic phase restarts."""
+        self.spec = spec
+        self._phase = 0
+
+    def admit(self, *, height_m: float | None, attempt: int = 1) -> bool:
+        """One new value: True to keep it, False to drop it. `height_m`: height above the target as the
+        vehicle knows it (None when unknown: height faults then keep the value)."""
+        self.produced += 1
+        spec = self.spec
+        active = spec.active and not (spec.first_attempt_only and attempt > 1)
+        drop = active and self._should_drop(spec, height_m)
+        if drop:
+            self.dropped += 1
+        return not drop
+
+    def _should_drop(self, spec: FaultSpec, height_m: float | None) -> bool:
+        kind = spec.kind
+        if kind is FaultKind.RANDOM:
+            return bool(self._rng.random() < spec.probability)
+        if kind is FaultKind.PERMANENT:
+            return True
+        if kind is FaultKind.PERIODIC:
+            cycle = spec.keep + spec.drop
+            position = self._phase % cycle
+            self._phase += 1
+            return position >= spec.keep
+        if kind is FaultKind.BELOW:
+            return height_m is not None and height_m <= spec.height_m
+        if kind is FaultKind.ABOVE:
+            return height_m is not None and height_m >= spec.height_m
+        return False

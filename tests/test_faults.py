@@ -1,0 +1,131 @@
+"""Fault models, the thesis' fault command, and the CLI/spec fault syntax."""
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from preland_app.cli import app
+from preland_app.sensing.faults import (
+    FaultCommand,
+    FaultInjector,
+    FaultKind,
+    FaultSpec,
+    FaultSyntaxError,
+    FaultTarget,
+)
+
+from .conftest import THESIS_MISSION
+
+
+def _injector(text, seed=0, sensor="irlock"):
+    return FaultInjector(sensor=sensor, spec=FaultSpec.parse(text), rng=np.random.default_rng(seed))
+
+
+def test_random_drops_the_asked_fraction_with_seeded_results():
+    injector = _injector("random:0.75", seed=11)
+    kept = [injector.admit(height_m=5.0) for _ in range(10_000)]
+    assert injector.produced == 10_000
+    assert injector.dropped / injector.produced == pytest.approx(0.75, abs=0.02)
+    again = _injector("random:0.75", seed=11)
+    assert [again.admit(height_m=5.0) for _ in range(10_000)] == kept
+    other = _injector("random:0.75", seed=12)
+    assert [other.admit(height_m=5.0) for _ in range(10_000)] != kept
+
+
+def test_periodic_pattern_is_exact():
+    injector = _injector("periodic:3:2")
+    pattern = [injector.admit(height_m=None) for _ in range(15)]
+    assert pattern == [True, True, True, False, False] * 3
+    assert (injector.produced, injector.dropped) == (15, 6)
+
+
+def test_permanent_and_none():
+    permanent, none = _injector("permanent"), _injector("none")
+    assert not any(permanent.admit(height_m=1.0) for _ in range(100))
+    assert all(none.admit(height_m=1.0) for _ in range(100))
+    assert permanent.dropped == 100 and none.dropped == 0
+
+
+def test_below_and_above_gate_exactly_at_the_threshold():
+    below, above = _injector("below:3"), _injector("above:3")
+    heights = [5.0, 3.0001, 3.0, 2.9999, 0.5]
+    assert [below.admit(height_m=h) for h in heights] == [True, True, False, False, False]
+    assert [above.admit(height_m=h) for h in heights] == [False, False, False, True, True]
+    assert below.admit(height_m=None) and above.admit(height_m=None)  # unknown height: keep
+
+
+def test_first_attempt_scope():
+    injector = _injector("below:3:first-attempt")
+    assert not injector.admit(height_m=2.0, attempt=1)
+    assert injector.admit(height_m=2.0, attempt=2)
+    assert str(injector.spec) == "below:3:first-attempt"
+
+
+@pytest.mark.parametrize("text", ["random", "random:1.5", "periodic:3", "below", "sometimes", "periodic:0:0",
+                                  "below:-1", "random:x", "permanent:2"])
+def test_bad_fault_syntax_is_rejected(text):
+    with pytest.raises(FaultSyntaxError):
+        FaultSpec.parse(text)
+
+
+def test_fault_syntax_round_trips():
+    for text in ("none", "random:0.5", "periodic:4:1", "permanent", "below:3", "above:2.5:first-attempt"):
+        assert str(FaultSpec.parse(text)) == text
+
+
+# The thesis' Table 1 rules.
+
+def test_command_r_drop_positive_selects_random_and_ignores_the_rest():
+    command = FaultCommand(target=FaultTarget.IRLOCK, r_drop=0.75, p_keep=5, p_drop=5)
+    assert command.faults() == {"irlock": FaultSpec(FaultKind.RANDOM, probability=0.75)}
+
+
+def test_command_r_drop_zero_selects_periodic():
+    command = FaultCommand(target=2, r_drop=0.0, p_keep=4, p_drop=2)
+    assert command.faults() == {"marker": FaultSpec(FaultKind.PERIODIC, keep=4, drop=2)}
+
+
+def test_command_r_drop_one_is_permanent_and_so_is_keep_zero_drop_positive():
+    assert FaultCommand(target=3, r_drop=1.0).fault().kind is FaultKind.PERMANENT
+    assert FaultCommand(target=3, p_keep=0, p_drop=7).fault().kind is FaultKind.PERMANENT
+    assert set(FaultCommand(target=3, r_drop=1.0).faults()) == {"irlock", "marker"}
+
+
+def test_command_all_zero_turns_injection_off():
+    assert FaultCommand(target=1).fault() == FaultSpec()
+    injector = _injector("permanent")
+    injector.set_spec(FaultCommand(target=1).fault())
+    assert injector.admit(height_m=1.0)
+
+
+def test_command_fields_are_checked():
+    with pytest.raises(FaultSyntaxError):
+        FaultCommand(target=1, r_drop=1.5)
+    with pytest.raises(ValueError):
+        FaultCommand(target=4)
+    with pytest.raises(FaultSyntaxError):
+        FaultCommand(target=1, p_keep=70000)
+
+
+# CLI and mission spec.
+
+@pytest.mark.parametrize("args, needle", [
+    (["--fault", "marker=sometimes"], "unknown fault"),
+    (["--fault", "camera=random:0.5"], "SENSOR=FAULT"),
+    (["--fault", "marker=below:3", "--fault", "marker=above:3"], "given twice"),
+    (["--land", "irlock", "--fault", "marker=below:3"], "does not use the marker"),
+    (["--land", "marker", "--sensor", "irlock"], "only the cautious mode"),
+    (["--land", "cautious", "--sensor", "sonar"], "unknown sensor"),
+])
+def test_cli_rejects_bad_fault_options_with_one_line(args, needle):
+    result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), *args])
+    assert result.exit_code == 2, result.output
+    assert needle in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_mission_file_fault_errors_name_the_field(tmp_path):
+    text = THESIS_MISSION.read_text().replace("  mode: normal", "  mode: marker\n  faults:\n    marker: below:three")
+    path = tmp_path / "m.yaml"
+    path.write_text(text)
+    result = CliRunner().invoke(app, ["fly", str(path)])
+    assert result.exit_code == 2 and "land.faults.marker" in result.stderr
