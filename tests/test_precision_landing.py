@@ -28,7 +28,8 @@ def test_fused_mode_uses_both_sensors_and_averages_when_both_are_new(thesis_miss
     outcome = run_trial(TrialRequest(mission=thesis_mission, seed=3, land_mode="fused", record_trajectory=False))
     assert outcome.details["fused_both"] > 50
     assert outcome.details["fused_irlock"] > 50
-    assert outcome.details["irlock_values"] > outcome.details["marker_values"] > 50
+    assert outcome.details["irlock_produced"] > outcome.details["marker_produced"] > 50
+    assert outcome.details["irlock_dropped"] == outcome.details["marker_dropped"] == 0
 
 
 def _companion_pointing(offset_north_m, offset_east_m, *, enable, stop_below_m=None):
