@@ -41,5 +41,6 @@ def test_modes_lists_every_land_mode_with_its_scoring_reference():
     result = CliRunner().invoke(app, ["modes"])
     assert result.exit_code == 0
     lines = {line.split()[0]: line for line in result.stdout.splitlines()}
-    assert set(lines) == {"normal", "irlock", "marker", "fused", "cautious"}
-    assert "takeoff" in lines["normal"] and all("pad" in lines[m] for m in ("irlock", "marker", "fused", "cautious"))
+    precision = ("irlock", "marker", "fused", "cautious", "paper_static", "paper_adaptive")
+    assert set(lines) == {"normal", *precision}
+    assert "takeoff" in lines["normal"] and all("pad" in lines[m] for m in precision)

@@ -16,6 +16,7 @@ from pathlib import Path
 from ..errors import SpecError, SpecValueError, require
 from ..landing.base import LandStrategy
 from ..landing.cautious import CautiousSpec
+from ..landing.paper import PaperSpec
 from ..landing.registry import LAND_MODES, PRECISION_SENSORS, create_land_strategy, land_mode_names, sensor_for
 from ..sensing.faults import SENSORS as FAULT_SENSORS
 from ..sensing.faults import FaultSpec, FaultSyntaxError
@@ -97,12 +98,16 @@ class PathSpec:
 class LandSpec:
     """How to land. `mode`: normal, irlock, marker, fused or cautious; `sensor`: the precision sensor of
     the cautious mode (irlock, marker or fused; default marker); `faults`: per sensor (irlock, marker),
-    in the fault syntax (`random:0.75`, `below:3:first-attempt`...); `cautious`: the retry parameters."""
+    in the fault syntax (`random:0.75`, `below:3:first-attempt`...); `cautious`: the retry parameters;
+    `paper`: the paper algorithms' parameters; `normal_scored_from`: what a `normal` landing is scored
+    against, `takeoff` (the thesis) or `pad` (the paper, whose GPS landing aims at the marker)."""
 
     mode: str = "normal"
     sensor: str | None = None
     faults: dict[str, str] = field(default_factory=dict)
     cautious: CautiousSpec = field(default_factory=CautiousSpec)
+    paper: PaperSpec = field(default_factory=PaperSpec)
+    normal_scored_from: str = "takeoff"
 
     def __post_init__(self) -> None:
         require(self.mode in LAND_MODES, "mode",
@@ -111,6 +116,7 @@ class LandSpec:
             require(self.mode == "cautious", "sensor", "only the cautious mode takes a sensor (the others are one)")
             require(self.sensor in PRECISION_SENSORS, "sensor",
                     f"unknown sensor {self.sensor!r} (expected one of: {', '.join(PRECISION_SENSORS)})")
+        require(self.normal_scored_from in ("takeoff", "pad"), "normal_scored_from", "must be takeoff or pad")
         used = {None: (), "irlock": ("irlock",), "marker": ("marker",), "fused": ("irlock", "marker")}[
             sensor_for(self.mode, self.sensor)]
         for sensor, text in self.faults.items():
@@ -132,7 +138,8 @@ class LandSpec:
 
     def strategy(self) -> LandStrategy:
         return create_land_strategy(self.mode, sensor=self.sensor, faults=self.fault_specs(),
-                                    cautious=self.cautious if self.mode == "cautious" else None)
+                                    cautious=self.cautious if self.mode == "cautious" else None,
+                                    paper=self.paper, normal_reference=self.normal_scored_from)
 
 
 @dataclass(frozen=True)
@@ -194,9 +201,8 @@ class MissionSpec:
         land = self.land
         new_mode = mode or land.mode
         new_sensor = sensor if sensor is not None else (land.sensor if new_mode == "cautious" else None)
-        return replace(self, land=LandSpec(mode=new_mode, sensor=new_sensor,
-                                           faults=faults if faults is not None else dict(land.faults),
-                                           cautious=land.cautious))
+        return replace(self, land=replace(land, mode=new_mode, sensor=new_sensor,
+                                          faults=faults if faults is not None else dict(land.faults)))
 
 
 def load_mission(path: str | Path) -> MissionSpec:
