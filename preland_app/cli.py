@@ -181,6 +181,148 @@ def pad_render(
                + ", ".join(f"id {m.id} {m.side_m * 100:.0f} cm" for m in pad.markers) + ")")
 
 
+campaign_app = typer.Typer(help="Campaigns: repeated trials, a results store, reports.", no_args_is_help=True)
+app.add_typer(campaign_app, name="campaign")
+
+
+def _open_store(db: Path, *, must_exist: bool):
+    from .campaign.store import ResultsStore
+
+    if must_exist and not db.exists():
+        raise fail(f"{db}: no such results database")
+    try:
+        return ResultsStore(db)
+    except PrelandError as error:
+        raise fail(str(error)) from None
+
+
+@campaign_app.command("run")
+def campaign_run(
+    campaign_file: Path = typer.Argument(..., metavar="FILE", help="Campaign YAML file (see campaigns/)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes (default: number of cores)."),
+    db: Path = typer.Option(Path("results.db"), "--db", help="SQLite results database (created if missing)."),
+    resume: bool = typer.Option(False, "--resume", help="Finish a campaign already in --db; no trial runs twice."),
+    report: Optional[Path] = typer.Option(None, "--report", help="Write the campaign's report to this folder."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+) -> None:
+    """Run every trial of a campaign on the embedded simulator, storing each as it finishes."""
+    import os
+    import time
+
+    from .campaign.executor import CampaignInterrupted, run_campaign
+    from .campaign.report import write_report
+    from .campaign.spec import load_campaign
+
+    try:
+        campaign = load_campaign(campaign_file)
+    except PrelandError as error:
+        raise fail(str(error)) from None
+    if workers is not None and workers < 1:
+        raise fail(f"--workers: must be >= 1, got {workers}")
+    store = _open_store(db, must_exist=False)
+    started = time.perf_counter()
+    failures: list[str] = []
+    try:
+        with _progress(enabled=not quiet) as advance:
+            def progress(done: int, total: int, record) -> None:
+                advance(done, total)
+                if record is not None and record.result.get("outcome") == "error":
+                    failures.append(f"{record.scenario} #{record.trial_index}: {record.result.get('message')}")
+
+            ran, total = run_campaign(campaign, store, workers=workers or os.cpu_count() or 1, resume=resume,
+                                      progress=progress)
+    except CampaignInterrupted as error:
+        store.close()
+        typer.echo(f"preland: {error}", err=True)
+        raise typer.Exit(130) from None
+    except PrelandError as error:
+        store.close()
+        raise fail(str(error)) from None
+    elapsed = time.perf_counter() - started
+    typer.echo(f"campaign {campaign.name}: {ran} trial(s) run, {total} in {db} ({elapsed:.1f} s)")
+    for line in failures:
+        typer.echo(f"  trial failed: {line}", err=True)
+    if report is not None:
+        for path in write_report(store, campaign.name, report):
+            typer.echo(f"wrote {path}")
+    store.close()
+
+
+def _progress(*, enabled: bool):
+    """A progress bar with ETA on stderr (a no-op when disabled)."""
+    from contextlib import contextmanager
+
+    @contextmanager
+    def bar():
+        if not enabled:
+            yield lambda done, total: None
+            return
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import TimeRemainingColumn
+
+        with Progress(TextColumn("trials"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      TextColumn("ETA"), TimeRemainingColumn(), console=Console(stderr=True),
+                      transient=False) as progress:
+            task = progress.add_task("trials", total=None)
+
+            def advance(done: int, total: int) -> None:
+                progress.update(task, completed=done, total=total)
+
+            yield advance
+
+    return bar()
+
+
+@campaign_app.command("report")
+def campaign_report(
+    db: Path = typer.Argument(..., metavar="DB", help="SQLite results database."),
+    campaign: Optional[str] = typer.Option(None, "--campaign", help="Campaign name (default: every campaign)."),
+    out: Path = typer.Option(Path("report"), "--out", help="Folder for the Markdown, CSV and PNG files."),
+) -> None:
+    """Write each campaign's table (Markdown, CSV) and figures (PNG), published figures beside."""
+    from .campaign.report import markdown_table, summarize, write_report
+
+    store = _open_store(db, must_exist=True)
+    names = [campaign] if campaign else store.campaigns()
+    if not names:
+        raise fail(f"{db}: no campaigns stored")
+    try:
+        for name in names:
+            written = write_report(store, name, out)
+            typer.echo(markdown_table(name, summarize(store, name)))
+            for path in written:
+                typer.echo(f"wrote {path}")
+    except PrelandError as error:
+        raise fail(str(error)) from None
+    finally:
+        store.close()
+
+
+@campaign_app.command("export")
+def campaign_export(
+    db: Path = typer.Argument(..., metavar="DB", help="SQLite results database."),
+    export_format: str = typer.Option("csv", "--format", help="Export format: csv."),
+    campaign: Optional[str] = typer.Option(None, "--campaign", help="Only this campaign."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Output file (default: standard output)."),
+) -> None:
+    """Export every stored trial, one row per trial."""
+    from .campaign.report import export_csv
+
+    if export_format != "csv":
+        raise fail(f"--format: unknown format {export_format!r} (expected: csv)")
+    store = _open_store(db, must_exist=True)
+    try:
+        text = export_csv(store, campaign)
+    finally:
+        store.close()
+    if out is None:
+        typer.echo(text, nl=False)
+    else:
+        out.write_text(text, encoding="utf-8")
+        typer.echo(f"wrote {out}")
+
+
 @app.command("modes")
 def modes() -> None:
     """List the land modes this version can fly."""

@@ -1,0 +1,184 @@
+"""Campaign specs: a mission, scenarios (land mode, sensor, faults, initial height, environment), trials.
+
+YAML files in campaigns/, loaded into frozen dataclasses and validated at load
+time; every error names the file and the field. Scenario overrides are applied
+to the mission at load time too, so a bad override is reported before any trial
+runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from ..config.loader import build, read_yaml_mapping
+from ..config.mission import MissionSpec, load_mission
+from ..errors import SpecError, SpecValueError, require
+from ..sim.spec import EnvironmentSpec
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    """Published figures for a scenario: mean and max landing error in cm, mean landing time in s, and
+    optionally the published trials (a CSV like the thesis' field trials, filtered by `source_table`)."""
+
+    avg_error_cm: float | None = None
+    max_error_cm: float | None = None
+    avg_landing_time_s: float | None = None
+    source: str = ""
+    trials_csv: str | None = None
+    source_table: int | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("avg_error_cm", "max_error_cm", "avg_landing_time_s"):
+            value = getattr(self, name)
+            require(value is None or value >= 0, name, "must be >= 0")
+        require((self.trials_csv is None) == (self.source_table is None), "source_table",
+                "give trials_csv and source_table together")
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """One scenario: a label, how it lands, what fails, from how high, in which environment."""
+
+    label: str
+    land: str
+    sensor: str | None = None
+    faults: dict[str, str] = field(default_factory=dict)
+    initial_height_m: float | None = None
+    environment: dict[str, Any] = field(default_factory=dict)
+    params: dict[str, float] = field(default_factory=dict)
+    trials: int | None = None
+    reference: ReferenceSpec | None = None
+
+    def __post_init__(self) -> None:
+        require(bool(self.label.strip()), "label", "must not be empty")
+        require(self.trials is None or self.trials > 0, "trials", f"must be > 0, got {self.trials}")
+        require(self.initial_height_m is None or 0 < self.initial_height_m <= 120, "initial_height_m",
+                "must be > 0 and <= 120 m")
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """A campaign. `mission` is a mission file relative to the campaign file; `pad` overrides its pad preset."""
+
+    name: str
+    mission: str
+    scenarios: tuple[ScenarioSpec, ...]
+    trials: int = 10
+    base_seed: int = 0
+    description: str = ""
+    pad: str | None = None
+    source_path: str = field(default="", compare=False)
+
+    def __post_init__(self) -> None:
+        require(bool(re.fullmatch(r"[A-Za-z0-9_.-]+", self.name)), "name",
+                "must be a non-empty word (letters, digits, _ . -)")
+        require(self.trials > 0, "trials", f"must be > 0, got {self.trials}")
+        require(len(self.scenarios) > 0, "scenarios", "needs at least one scenario")
+        labels = [s.label for s in self.scenarios]
+        for index, label in enumerate(labels):
+            require(labels.index(label) == index, f"scenarios[{index}].label", f"duplicate label {label!r}")
+
+    @property
+    def base_dir(self) -> Path:
+        return Path(self.source_path).parent if self.source_path else Path.cwd()
+
+    def trials_for(self, scenario: ScenarioSpec) -> int:
+        return scenario.trials if scenario.trials is not None else self.trials
+
+
+@dataclass(frozen=True)
+class ResolvedScenario:
+    """A scenario applied to the mission: what each of its trials flies."""
+
+    index: int
+    spec: ScenarioSpec
+    mission: MissionSpec
+    trials: int
+    takeoff_altitude_rel_m: float
+    spec_hash: str
+
+
+def _deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    merged = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = _deep_merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def _to_plain(value: Any) -> Any:
+    if dataclasses.is_dataclass(value):
+        return {f.name: _to_plain(getattr(value, f.name)) for f in dataclasses.fields(value) if f.name != "source_path"}
+    if isinstance(value, (list, tuple)):
+        return [_to_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _to_plain(v) for k, v in value.items()}
+    if hasattr(value, "value") and not isinstance(value, (int, float, str, bool)):
+        return value.value  # enums
+    return value
+
+
+def spec_hash(value: Any) -> str:
+    """A short stable hash of a spec's content."""
+    text = json.dumps(_to_plain(value), sort_keys=True, default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def resolve_scenarios(campaign: CampaignSpec, *, mission: MissionSpec | None = None) -> list[ResolvedScenario]:
+    """Apply each scenario to the mission; raises SpecError naming the campaign file and field."""
+    path = campaign.source_path
+    if mission is None:
+        mission = load_campaign_mission(campaign)
+    if campaign.pad is not None:
+        mission = replace(mission, pad=replace(mission.pad, preset=campaign.pad))
+    resolved = []
+    for index, scenario in enumerate(campaign.scenarios):
+        where = f"scenarios[{index}]"
+        try:
+            flown = mission.with_land(mode=scenario.land, sensor=scenario.sensor, faults=dict(scenario.faults))
+        except SpecValueError as error:
+            field_name = {"mode": "land"}.get(error.field, error.field)
+            raise SpecError(path=path, field=f"{where}.{field_name}", problem=error.problem) from None
+        if scenario.environment:
+            merged = _deep_merge(_to_plain(flown.environment), scenario.environment)
+            environment = build(EnvironmentSpec, merged, path=path, field=f"{where}.environment")
+            flown = replace(flown, environment=environment)
+        if scenario.params:
+            try:
+                flown = replace(flown, params={**flown.params, **scenario.params})
+            except SpecValueError as error:
+                raise SpecError(path=path, field=f"{where}.{error.field}", problem=error.problem) from None
+        altitude = scenario.initial_height_m or flown.takeoff_altitude_rel_m()
+        resolved.append(ResolvedScenario(index=index, spec=scenario, mission=flown,
+                                         trials=campaign.trials_for(scenario), takeoff_altitude_rel_m=altitude,
+                                         spec_hash=spec_hash({"mission": flown, "altitude": altitude})))
+    return resolved
+
+
+def load_campaign_mission(campaign: CampaignSpec) -> MissionSpec:
+    mission_path = Path(campaign.mission)
+    if not mission_path.is_absolute():
+        mission_path = campaign.base_dir / mission_path
+    if not mission_path.exists():
+        raise SpecError(path=campaign.source_path, field="mission", problem=f"unknown mission: {mission_path} not found")
+    return load_mission(mission_path)
+
+
+def load_campaign(path: str | Path) -> CampaignSpec:
+    """Load and validate a campaign file, scenarios applied to the mission included."""
+    path_text = str(path)
+    data = read_yaml_mapping(path)
+    if "source_path" in data:
+        raise SpecError(path=path_text, field="source_path", problem="unknown key")
+    campaign = replace(build(CampaignSpec, data, path=path_text), source_path=path_text)
+    resolve_scenarios(campaign)
+    return campaign

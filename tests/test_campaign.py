@@ -1,0 +1,234 @@
+"""Campaigns: spec validation, the store, workers, kill and resume, failing trials, reports."""
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from preland_app.campaign.executor import derive_seed, run_campaign
+from preland_app.campaign.report import export_csv, summarize, write_report
+from preland_app.campaign.spec import load_campaign
+from preland_app.campaign.store import ResultsStore, TrialRecord
+from preland_app.cli import app
+
+from .conftest import ROOT
+
+MISSION = ROOT / "missions" / "thesis_square_land.yaml"
+COMPARED = ("scenario", "trial_index", "seed", "outcome", "message", "landing_error_cm", "offset_north_cm",
+            "offset_east_cm", "landing_time_s", "flight_time_s", "touchdown_speed_m_s", "details", "spec_hash")
+
+
+def write_campaign(tmp_path: Path, body: str, name: str = "campaign.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(f"mission: {MISSION}\n" + body)
+    return path
+
+
+QUICK = """name: quick
+trials: 3
+base_seed: 7
+scenarios:
+  - {label: gps, land: normal, environment: {wind: {speed_m_s: 0.0}},
+     reference: {avg_error_cm: 67.15, max_error_cm: 180.0, source: "thesis Table 3"}}
+  - {label: irlock, land: irlock, faults: {irlock: "random:0.5"}, initial_height_m: 8}
+"""
+
+
+def comparable(store: ResultsStore, campaign: str) -> list[tuple]:
+    return [tuple(str(t[c]) for c in COMPARED) for t in store.trials(campaign)]
+
+
+def test_store_round_trip_in_memory():
+    store = ResultsStore(":memory:")
+    record = TrialRecord(campaign="c", scenario="s", scenario_index=0, trial_index=3, seed=11,
+                         result={"outcome": "landed", "message": "ok", "landing_error_cm": 4.5,
+                                 "details": {"attempts": 2}},
+                         spec_hash="abc", events=({"time_s": 1.0, "kind": "armed", "message": "armed", "x": 1},),
+                         trajectory_columns=("time_s", "v"), trajectory_rows=((0.0, 1.0), (0.5, 2.0)))
+    trial_id = store.add_trial(record)
+    (row,) = store.trials("c")
+    assert row["landing_error_cm"] == 4.5 and row["details"] == {"attempts": 2} and row["source"] == "sim"
+    assert store.done_keys("c") == {("s", 3)}
+    assert store.events(trial_id) == [{"time_s": 1.0, "kind": "armed", "message": "armed", "data": {"x": 1}}]
+    assert store.trajectory(trial_id) == (["time_s", "v"], [[0.0, 1.0], [0.5, 2.0]])
+    with pytest.raises(sqlite3.IntegrityError):
+        store.add_trial(record)  # a trial is never stored twice
+    assert len(store.trials("c")) == 1
+
+
+def test_seeds_come_from_the_trial_identity():
+    assert derive_seed(7, "gps", 0) == derive_seed(7, "gps", 0)
+    assert len({derive_seed(7, "gps", i) for i in range(50)}) == 50
+    assert derive_seed(7, "gps", 0) != derive_seed(8, "gps", 0) != derive_seed(7, "irlock", 0)
+
+
+def test_one_and_two_workers_give_identical_trials(tmp_path):
+    campaign = load_campaign(write_campaign(tmp_path, QUICK))
+    results = []
+    for workers in (1, 2):
+        with ResultsStore(tmp_path / f"w{workers}.db") as store:
+            ran, total = run_campaign(campaign, store, workers=workers)
+            assert (ran, total) == (6, 6)
+            results.append(comparable(store, "quick"))
+    assert results[0] == results[1]
+    assert {r[3] for r in results[0]} == {"landed"}
+
+
+def test_a_failing_trial_is_recorded_and_the_campaign_goes_on(tmp_path):
+    pad = tmp_path / "pad.yaml"
+    pad.write_text("name: p\ndictionary: DICT_4X4_50\nmarkers: [{id: 16, side_m: 0.6}]\n")
+    body = f"""name: fragile
+trials: 2
+scenarios:
+  - {{label: gps, land: normal}}
+  - {{label: marker, land: marker}}
+pad: {pad}
+"""
+    campaign = load_campaign(write_campaign(tmp_path, body))
+    pad.unlink()  # the pad file disappears after the campaign was checked
+    with ResultsStore(":memory:") as store:
+        assert run_campaign(campaign, store, workers=1) == (4, 4)
+        outcomes = {(t["scenario"], t["outcome"]) for t in store.trials("fragile")}
+        assert outcomes == {("gps", "landed"), ("marker", "error")}
+        message = next(t["message"] for t in store.trials("fragile") if t["outcome"] == "error")
+        assert "pad.yaml" in message
+
+
+def test_running_again_needs_resume_and_resume_repeats_nothing(tmp_path):
+    campaign = load_campaign(write_campaign(tmp_path, QUICK))
+    with ResultsStore(tmp_path / "r.db") as store:
+        run_campaign(campaign, store, workers=1)
+        with pytest.raises(Exception, match="--resume"):
+            run_campaign(campaign, store, workers=1)
+        assert run_campaign(campaign, store, workers=1, resume=True) == (0, 6)
+        assert len(store.trials("quick")) == 6
+
+
+def test_resume_refuses_a_changed_scenario(tmp_path):
+    path = write_campaign(tmp_path, QUICK)
+    with ResultsStore(tmp_path / "r.db") as store:
+        run_campaign(load_campaign(path), store, workers=1)
+        path.write_text(path.read_text().replace("speed_m_s: 0.0", "speed_m_s: 2.0"))
+        with pytest.raises(Exception, match="spec changed"):
+            run_campaign(load_campaign(path), store, workers=1, resume=True)
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc to find worker processes")
+def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
+    body = QUICK.replace("trials: 3", "trials: 6")
+    path = write_campaign(tmp_path, body)
+    db = tmp_path / "killed.db"
+    command = [sys.executable, "-m", "preland_app.cli", "campaign", "run", str(path), "--db", str(db),
+               "--workers", "2", "--quiet"]
+    process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    stored = 0
+    workers: list[int] = []
+    while time.monotonic() < deadline:
+        workers = workers or _children(process.pid)
+        if db.exists():
+            try:
+                with sqlite3.connect(db) as connection:
+                    stored = connection.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+            except sqlite3.OperationalError:
+                stored = 0
+        if stored >= 3:
+            break
+        time.sleep(0.05)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait(timeout=10)
+    assert 3 <= stored < 12, "the campaign should be killed part way"
+    time.sleep(1.0)
+    assert not [pid for pid in workers if Path(f"/proc/{pid}").exists()
+                and "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()], "orphan workers"
+
+    result = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(db), "--resume", "--quiet",
+                                      "--workers", "2"])
+    assert result.exit_code == 0, result.output
+    with ResultsStore(db) as resumed, ResultsStore(tmp_path / "straight.db") as straight:
+        run_campaign(load_campaign(path), straight, workers=1)
+        assert len(resumed.trials("quick")) == 12
+        assert len({(t["scenario"], t["trial_index"]) for t in resumed.trials("quick")}) == 12
+        assert comparable(resumed, "quick") == comparable(straight, "quick")
+
+
+BAD = {
+    "unknown mission": ("name: x\nmission: nowhere.yaml\nscenarios: [{label: a, land: normal}]\n", "mission",
+                        "unknown mission"),
+    "unknown land mode": ("name: x\nscenarios: [{label: a, land: teleport}]\n", "scenarios[0].land",
+                          "unknown land mode"),
+    "bad fault syntax": ("name: x\nscenarios: [{label: a, land: marker, faults: {marker: 'below:'}}]\n",
+                         "scenarios[0].faults.marker", "fault"),
+    "zero trials": ("name: x\ntrials: 0\nscenarios: [{label: a, land: normal}]\n", "trials", "must be > 0"),
+    "duplicate labels": ("name: x\nscenarios: [{label: a, land: normal}, {label: a, land: irlock}]\n",
+                         "scenarios[1].label", "duplicate label"),
+    "malformed yaml": ("name: x\nscenarios: [{label: a, land: normal\n", "", "malformed YAML"),
+    "unknown key": ("name: x\ntrails: 3\nscenarios: [{label: a, land: normal}]\n", "trails", "unknown key"),
+    "bad environment": ("name: x\nscenarios: [{label: a, land: normal, environment: {wind: {speed: 3}}}]\n",
+                        "scenarios[0].environment.wind.speed", "unknown key"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_campaign_files_give_one_clear_line(tmp_path, case):
+    body, field, problem = BAD[case]
+    if "mission:" in body:
+        path = tmp_path / "c.yaml"
+        path.write_text(body)
+    else:
+        path = write_campaign(tmp_path, body, "c.yaml")
+    result = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(tmp_path / "r.db"), "--quiet"])
+    assert result.exit_code == 2, result.output
+    message = result.stderr.strip()
+    assert len(message.splitlines()) == 1 and "Traceback" not in result.output
+    assert str(path) in message and field in message and problem in message
+
+
+def test_report_and_export(tmp_path):
+    campaign = load_campaign(write_campaign(tmp_path, QUICK))
+    with ResultsStore(tmp_path / "r.db") as store:
+        run_campaign(campaign, store, workers=1)
+        summaries = summarize(store, "quick")
+        assert [s.label for s in summaries] == ["gps", "irlock"]
+        assert summaries[0].reference.avg_error_cm == 67.15 and summaries[1].reference is None
+        assert summaries[1].initial_height_m == 8 and summaries[1].failures == "irlock random:0.5"
+        files = write_report(store, "quick", tmp_path / "report")
+        text = (tmp_path / "report" / "quick.md").read_text()
+        assert "| gps | 10 | normal | none | none |" in text and "| 67.15 |" in text
+        assert "| irlock | 8 | irlock | irlock | irlock random:0.5 |" in text
+        pngs = [f for f in files if f.suffix == ".png"]
+        assert len(pngs) == 3 and all(f.read_bytes()[:4] == b"\x89PNG" and f.stat().st_size > 10_000 for f in pngs)
+        lines = export_csv(store, "quick").strip().splitlines()
+        assert len(lines) == 7 and lines[0].startswith("campaign,scenario")
+
+    result = CliRunner().invoke(app, ["campaign", "export", str(tmp_path / "r.db"), "--format", "csv"])
+    assert result.exit_code == 0 and len(result.stdout.strip().splitlines()) == 7
+    result = CliRunner().invoke(app, ["campaign", "report", str(tmp_path / "r.db"), "--out", str(tmp_path / "rep2")])
+    assert result.exit_code == 0 and (tmp_path / "rep2" / "quick_errors.png").exists()
+    result = CliRunner().invoke(app, ["campaign", "report", str(tmp_path / "missing.db")])
+    assert result.exit_code == 2 and "no such results database" in result.stderr
+
+
+@pytest.mark.parametrize("name", ["thesis_table3", "thesis_table4", "thesis_table5", "paper_comparison", "smoke"])
+def test_shipped_campaign_files_load(name):
+    campaign = load_campaign(ROOT / "campaigns" / f"{name}.yaml")
+    assert campaign.name == name and campaign.scenarios
