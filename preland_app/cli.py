@@ -76,7 +76,7 @@ def _format_outcome_table(data: dict) -> str:
 
 
 def _parse_faults(values: list[str]) -> dict[str, str]:
-    from .sensing.faults import FAULT_SYNTAX, SENSORS, FaultSpec, FaultSyntaxError
+    from .sensing.faults import SENSORS, FaultSpec, FaultSyntaxError
 
     faults: dict[str, str] = {}
     for value in values:

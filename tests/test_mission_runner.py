@@ -4,7 +4,6 @@ import asyncio
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from preland_app.clock import LoopClock, run_virtual
 from preland_app.errors import CommandDenied, LinkLost, MissionAborted, WaitTimeout

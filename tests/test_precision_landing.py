@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from preland_app.clock import run_virtual
+
 from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
 from preland_app.vehicle.types import FlightMode, LandingTarget

@@ -161,7 +161,6 @@ def test_body_velocity_is_rotated_by_yaw():
 def test_goto_global_reaches_the_point():
     async def scenario(vehicle, simulator, clock):
         await airborne(vehicle, clock)
-        t = await vehicle.telemetry()
         plane = LocalTangentPlane(simulator.origin)
         home_ned = plane.to_ned(simulator.origin)
         target = plane.to_geodetic(north_m=home_ned[0] + 8.0 + simulator.autopilot.home_north_m,

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from ..config.loader import build, read_yaml_mapping
+from ..config.loader import build, load_spec_file
 from ..config.mission import MissionSpec, load_mission
 from ..errors import SpecError, SpecValueError, require
 from ..sim.spec import EnvironmentSpec
@@ -175,10 +175,6 @@ def load_campaign_mission(campaign: CampaignSpec) -> MissionSpec:
 
 def load_campaign(path: str | Path) -> CampaignSpec:
     """Load and validate a campaign file, scenarios applied to the mission included."""
-    path_text = str(path)
-    data = read_yaml_mapping(path)
-    if "source_path" in data:
-        raise SpecError(path=path_text, field="source_path", problem="unknown key")
-    campaign = replace(build(CampaignSpec, data, path=path_text), source_path=path_text)
+    campaign = load_spec_file(CampaignSpec, path)
     resolve_scenarios(campaign)
     return campaign

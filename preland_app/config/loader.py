@@ -158,3 +158,12 @@ def build(cls: type[T], data: Any, *, path: str, field: str = "") -> T:
         return cls(**kwargs)
     except SpecValueError as error:
         raise SpecError(path=path, field=_join(field, error.field), problem=error.problem) from None
+
+
+def load_spec_file(cls: type[T], path: str | Path) -> T:
+    """Load a YAML file into dataclass `cls`, recording where it came from in its `source_path` field."""
+    path_text = str(path)
+    data = read_yaml_mapping(path)
+    if "source_path" in data:
+        raise SpecError(path=path_text, field="source_path", problem="unknown key")
+    return dataclasses.replace(build(cls, data, path=path_text), source_path=path_text)

@@ -24,7 +24,7 @@ from ..sim.params import ARDUCOPTER_PARAMS
 from ..sensing.pad import PAD_PRESETS, PadSpec, load_pad
 from ..sensing.spec import SensorsSpec
 from ..sim.spec import EnvironmentSpec
-from .loader import build, read_yaml_mapping
+from .loader import load_spec_file
 
 _MAX_ALTITUDE_M = 120.0  # the usual legal ceiling for small drones
 
@@ -208,10 +208,7 @@ class MissionSpec:
 def load_mission(path: str | Path) -> MissionSpec:
     """Load and validate a mission YAML file. Raises SpecError naming file and field."""
     path_text = str(path)
-    data = read_yaml_mapping(path)
-    if "source_path" in data:
-        raise SpecError(path=path_text, field="source_path", problem="unknown key")
-    spec = replace(build(MissionSpec, data, path=path_text), source_path=path_text)
+    spec = load_spec_file(MissionSpec, path)
     # Resolve referenced files now, so a bad pad or calibration file is reported at load time.
     try:
         spec.pad_spec()

@@ -19,8 +19,7 @@ turns it about the pad's vertical axis. Presets:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
