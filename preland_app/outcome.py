@@ -65,7 +65,7 @@ def score_touchdown(*, touchdown_ned_m: tuple[float, float], reference_ned_m: tu
     return LandingScore(math.hypot(north_cm, east_cm), north_cm, east_cm)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrialOutcome:
     """Everything one trial produced. Times in vehicle seconds; offsets in cm."""
 

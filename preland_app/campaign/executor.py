@@ -42,7 +42,7 @@ class CampaignInterrupted(PrelandError):
         super().__init__(f"interrupted: {done} of {total} trials stored; run again with --resume to finish")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrialJob:
     """One trial of a campaign, with everything a worker process needs."""
 

@@ -31,7 +31,7 @@ class PublishedTrial:
     landing_time_s: float | None
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ScenarioSummary:
     label: str
     index: int

@@ -93,7 +93,7 @@ class CampaignSpec:
         return scenario.trials if scenario.trials is not None else self.trials
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ResolvedScenario:
     """A scenario applied to the mission: what each of its trials flies."""
 

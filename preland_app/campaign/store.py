@@ -92,7 +92,7 @@ class StoreError(PrelandError):
     """The results store cannot be used as asked."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrialRecord:
     """Everything one trial stores. `result` holds the outcome fields (see OUTCOME_COLUMNS) and `details`."""
 

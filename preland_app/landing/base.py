@@ -27,7 +27,7 @@ class ScoringReference(enum.Enum):
     TAKEOFF = "takeoff"  # normal mode: the take-off position
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LandingContext:
     """What a land mode may use. No ground truth in here, on purpose."""
 

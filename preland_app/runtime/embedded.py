@@ -25,7 +25,7 @@ from .recorder import TrajectoryRecorder
 
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrialRequest:
     """One trial: a mission, a seed, and optional overrides of its land mode, sensor, faults
     (sensor -> fault syntax) and take-off altitude."""

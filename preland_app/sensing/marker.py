@@ -20,7 +20,7 @@ from .pad import MarkerSpec, PadSpec, aruco_dictionary
 from .readings import TargetReading, angles_from_camera_point
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class MarkerDetection:
     """One pad marker found in a frame. `pad_center_cam_m`: the pad centre in the camera frame (m)."""
 

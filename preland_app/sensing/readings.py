@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from ..vehicle.types import LandingTarget
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class TargetReading:
     """One sensor value. Angles in rad off the downward camera axis, body FRD convention of
     LANDING_TARGET (angle_x > 0: target to the right; angle_y > 0: target behind);

@@ -18,7 +18,7 @@ from .spec import AirframeSpec
 GRAVITY_M_S2 = 9.80665
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, kw_only=True)
 class Touchdown:
     """One ground contact. Position NED in m from the simulation origin (true)."""
 

@@ -19,7 +19,7 @@ _FAST_NOISE_TAU_S = 1.0
 _BARO_NOISE_TAU_S = 0.3
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, kw_only=True)
 class NavEstimate:
     """One navigation output. Positions NED in m from the simulation origin."""
 

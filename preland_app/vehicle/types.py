@@ -90,7 +90,7 @@ class Battery:
     remaining_pct: float
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Telemetry:
     """One snapshot of what the autopilot reports. Everything here is *estimated*.
 
@@ -125,7 +125,7 @@ class LandingTargetFrame(enum.Enum):
     LOCAL_FRD = 20
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class LandingTarget:
     """The content of a MAVLink LANDING_TARGET message.
 
