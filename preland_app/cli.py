@@ -323,6 +323,52 @@ def campaign_export(
         typer.echo(f"wrote {out}")
 
 
+sim_app = typer.Typer(help="The embedded simulator as a MAVLink vehicle.", no_args_is_help=True)
+app.add_typer(sim_app, name="sim")
+
+
+@sim_app.command("serve")
+def sim_serve(
+    listen: str = typer.Option("udp:127.0.0.1:14550", "--listen",
+                               help="UDP address to serve on (localhost unless told otherwise)."),
+    speedup: float = typer.Option(1.0, "--speedup", help="Simulated seconds per wall second."),
+    seed: int = typer.Option(1, "--seed", help="Simulator seed (wind, GPS error, noise)."),
+    mission_file: Optional[Path] = typer.Option(None, "--mission",
+                                                help="Take the environment and parameters from this mission."),
+) -> None:
+    """Serve the embedded simulator over MAVLink, behaving like ArduCopter (Ctrl-C stops it)."""
+    import asyncio
+
+    from .clock_scaled import ScaledWallClock
+    from .sim.mavlink_face import MavlinkFace
+    from .sim.simulator import Simulator
+
+    if not 0.1 <= speedup <= 1000:
+        raise fail(f"--speedup: must be within 0.1..1000, got {speedup:g}")
+    environment, params, yaw = None, None, 0.0
+    if mission_file is not None:
+        from .config.mission import load_mission
+
+        try:
+            mission = load_mission(mission_file)
+        except PrelandError as error:
+            raise fail(str(error)) from None
+        environment, params, yaw = mission.environment, dict(mission.params), mission.initial_yaw_deg
+
+    async def main() -> None:
+        simulator = Simulator(seed=seed, environment=environment, params=params, initial_yaw_deg=yaw)
+        face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=speedup), listen=listen)
+        typer.echo(f"serving the embedded simulator on {listen} at {speedup:g}x (Ctrl-C to stop)")
+        await face.run()
+
+    try:
+        asyncio.run(main())
+    except PrelandError as error:
+        raise fail(str(error)) from None
+    except KeyboardInterrupt:
+        typer.echo("stopped")
+
+
 @app.command("modes")
 def modes() -> None:
     """List the land modes this version can fly."""

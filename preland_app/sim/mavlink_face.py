@@ -1,0 +1,393 @@
+"""The embedded simulator as a MAVLink system that behaves like ArduCopter, for what preland and a
+ground station use.
+
+It speaks MAVLink 2 (the ardupilotmega dialect, through pymavlink) on a UDP
+port, bound to localhost unless told otherwise, and replies to whoever talks to
+it. Like ArduPilot it streams nothing but HEARTBEAT until asked
+(MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM). It handles COMMAND_LONG
+(arm/disarm, take-off, land, RTL, set mode, message intervals, message
+requests), SET_MODE, SET_POSITION_TARGET_LOCAL_NED (positions and velocities,
+local and body frames), SET_POSITION_TARGET_GLOBAL_INT, LANDING_TARGET and the
+PARAM protocol, and sends HEARTBEAT (ArduPilot autopilot, Copter custom
+modes), SYS_STATUS, GLOBAL_POSITION_INT, LOCAL_POSITION_NED, ATTITUDE,
+HOME_POSITION, EXTENDED_SYS_STATE, STATUSTEXT, COMMAND_ACK, PARAM_VALUE, and
+SIMSTATE / SIM_STATE with the ground truth.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from ..clock import Clock
+from ..errors import CommandDenied, PrelandError
+from ..geo import GeoPoint, LocalTangentPlane
+from ..vehicle.types import FlightMode, LandedState, LandingTarget
+from .params import ARDUCOPTER_PARAMS
+from .simulator import Simulator
+
+os.environ.setdefault("MAVLINK20", "1")
+
+_STREAMS_DEFAULT_HZ = {mavlink2.MAVLINK_MSG_ID_HEARTBEAT: 1.0}
+# REQUEST_DATA_STREAM groups, as ArduPilot maps them (SRx_POSITION, SRx_EXTRA1, SRx_EXTENDED_STATUS).
+_DATA_STREAMS = {
+    mavlink2.MAV_DATA_STREAM_POSITION: (mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+                                        mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
+    mavlink2.MAV_DATA_STREAM_EXTRA1: (mavlink2.MAVLINK_MSG_ID_ATTITUDE, mavlink2.MAVLINK_MSG_ID_SIMSTATE),
+    mavlink2.MAV_DATA_STREAM_EXTENDED_STATUS: (mavlink2.MAVLINK_MSG_ID_SYS_STATUS,
+                                               mavlink2.MAVLINK_MSG_ID_EXTENDED_SYS_STATE),
+}
+_LANDED_STATE = {LandedState.ON_GROUND: 1, LandedState.IN_AIR: 2, LandedState.TAKING_OFF: 3,
+                 LandedState.LANDING: 4, LandedState.UNDEFINED: 0}
+_ACCEPTED = mavlink2.MAV_RESULT_ACCEPTED
+_DENIED = mavlink2.MAV_RESULT_DENIED
+_UNSUPPORTED = mavlink2.MAV_RESULT_UNSUPPORTED
+_FAILED = mavlink2.MAV_RESULT_FAILED
+
+
+class MavlinkFaceError(PrelandError):
+    """The MAVLink face cannot start (for example: the address is in use)."""
+
+
+def parse_listen(address: str) -> str:
+    """`udp:HOST:PORT` (or `udpin:`) -> a pymavlink `udpin:HOST:PORT` connection string."""
+    scheme, _, rest = address.partition(":")
+    host, _, port = rest.rpartition(":")
+    if scheme not in ("udp", "udpin") or not host or not port.isdigit():
+        raise MavlinkFaceError(f"--listen {address!r}: expected udp:HOST:PORT, e.g. udp:127.0.0.1:14550")
+    return f"udpin:{host}:{port}"
+
+
+class MavlinkFace:
+    """Serves one `Simulator` over MAVLink on a clock (wall time times a speed-up in practice)."""
+
+    def __init__(self, *, simulator: Simulator, clock: Clock, listen: str = "udp:127.0.0.1:14550",
+                 system_id: int = 1) -> None:
+        self.simulator = simulator
+        self.clock = clock
+        try:
+            self.connection = mavutil.mavlink_connection(parse_listen(listen), source_system=system_id,
+                                                         source_component=1, dialect="ardupilotmega")
+        except OSError as error:
+            raise MavlinkFaceError(f"--listen {listen!r}: {error.strerror or error}") from None
+        self.mav = self.connection.mav
+        self.plane = LocalTangentPlane(simulator.origin)
+        self.heartbeats_enabled = True
+        self.intervals_s: dict[int, float] = {k: 1.0 / v for k, v in _STREAMS_DEFAULT_HZ.items()}
+        self._next_send_s: dict[int, float] = {}
+        self._messages_sent = 0
+        self._peer_seen = False
+        self.landing_targets = 0
+        self._param_names = sorted(ARDUCOPTER_PARAMS)
+        self._status_sent = 0
+
+    # ---------------------------------------------------------------- running
+
+    async def run(self) -> None:
+        """Step the simulator and serve MAVLink until cancelled."""
+        sim = self.simulator
+        dt_s = sim.dt_s
+        try:
+            while True:
+                await self.clock.sleep(dt_s)
+                sim.step()
+                self._receive_all()
+                self._flush_status_text()
+                if self._peer_seen:
+                    self._send_streams()
+        finally:
+            self.connection.close()
+
+    def time_boot_ms(self) -> int:
+        return int(self.simulator.time_s * 1000) & 0xFFFFFFFF
+
+    def _receive_all(self) -> None:
+        while True:
+            try:
+                message = self.connection.recv_match(blocking=False)
+            except (OSError, ValueError):
+                return
+            if message is None:
+                return
+            self._peer_seen = True
+            handler = getattr(self, f"_on_{message.get_type().lower()}", None)
+            if handler is not None:
+                handler(message)
+
+    # ---------------------------------------------------------------- outgoing
+
+    def _send_streams(self) -> None:
+        now = self.simulator.time_s
+        for message_id, interval_s in list(self.intervals_s.items()):
+            if interval_s <= 0 or now < self._next_send_s.get(message_id, 0.0):
+                continue
+            self._next_send_s[message_id] = now + interval_s
+            self.send_message(message_id)
+
+    def send_message(self, message_id: int) -> bool:
+        """Send one message now; False for a message this face does not provide."""
+        sender = {
+            mavlink2.MAVLINK_MSG_ID_HEARTBEAT: self._send_heartbeat,
+            mavlink2.MAVLINK_MSG_ID_SYS_STATUS: self._send_sys_status,
+            mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._send_global_position,
+            mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self._send_local_position,
+            mavlink2.MAVLINK_MSG_ID_ATTITUDE: self._send_attitude,
+            mavlink2.MAVLINK_MSG_ID_HOME_POSITION: self._send_home,
+            mavlink2.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._send_extended_state,
+            mavlink2.MAVLINK_MSG_ID_SIMSTATE: self._send_simstate,
+            mavlink2.MAVLINK_MSG_ID_SIM_STATE: self._send_sim_state,
+            mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._send_autopilot_version,
+        }.get(message_id)
+        if sender is None:
+            return False
+        sender()
+        self._messages_sent += 1
+        return True
+
+    def _send_heartbeat(self) -> None:
+        if not self.heartbeats_enabled:
+            return
+        autopilot = self.simulator.autopilot
+        base_mode = mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink2.MAV_MODE_FLAG_STABILIZE_ENABLED
+        if autopilot.armed:
+            base_mode |= mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
+        status = mavlink2.MAV_STATE_ACTIVE if autopilot.armed else mavlink2.MAV_STATE_STANDBY
+        self.mav.heartbeat_send(mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode,
+                                autopilot.mode.value, status)
+
+    def _send_sys_status(self) -> None:
+        sim = self.simulator
+        sensors = 0x3FF
+        self.mav.sys_status_send(sensors, sensors, sensors, 200, int(sim.battery_voltage_v() * 1000), -1,
+                                 int(100 * sim.battery_remaining_fraction()), 0, 0, 0, 0, 0, 0)
+
+    def _estimate(self):
+        sim = self.simulator
+        autopilot = sim.autopilot
+        nav = sim.nav
+        here = self.plane.to_geodetic(north_m=nav.north_m, east_m=nav.east_m, down_m=nav.down_m)
+        relative_m = -(nav.down_m - autopilot.home_down_m)
+        return nav, here, relative_m
+
+    def _send_global_position(self) -> None:
+        nav, here, relative_m = self._estimate()
+        body = self.simulator.dynamics.state
+        heading_cdeg = int(math.degrees(body.yaw_rad) % 360 * 100)
+        self.mav.global_position_int_send(self.time_boot_ms(), int(here.latitude_deg * 1e7),
+                                          int(here.longitude_deg * 1e7), int(here.altitude_amsl_m * 1000),
+                                          int(relative_m * 1000), int(nav.velocity_north_m_s * 100),
+                                          int(nav.velocity_east_m_s * 100), int(nav.velocity_down_m_s * 100),
+                                          heading_cdeg)
+
+    def _send_local_position(self) -> None:
+        nav = self.simulator.nav
+        self.mav.local_position_ned_send(self.time_boot_ms(), nav.north_m, nav.east_m, nav.down_m,
+                                         nav.velocity_north_m_s, nav.velocity_east_m_s, nav.velocity_down_m_s)
+
+    def _send_attitude(self) -> None:
+        body = self.simulator.dynamics.state
+        self.mav.attitude_send(self.time_boot_ms(), body.roll_rad, body.pitch_rad,
+                               (body.yaw_rad + math.pi) % (2 * math.pi) - math.pi, 0.0, 0.0, 0.0)
+
+    def _send_home(self) -> None:
+        autopilot = self.simulator.autopilot
+        if not autopilot.home_set:
+            return
+        home = self.plane.to_geodetic(north_m=autopilot.home_north_m, east_m=autopilot.home_east_m,
+                                      down_m=autopilot.home_down_m)
+        self.mav.home_position_send(int(home.latitude_deg * 1e7), int(home.longitude_deg * 1e7),
+                                    int(home.altitude_amsl_m * 1000), autopilot.home_north_m, autopilot.home_east_m,
+                                    autopilot.home_down_m, (1.0, 0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+
+    def _send_extended_state(self) -> None:
+        landed = self.simulator.autopilot.landed_state()
+        self.mav.extended_sys_state_send(mavlink2.MAV_VTOL_STATE_MC, _LANDED_STATE[landed])
+
+    def _truth(self):
+        pose = self.simulator.true_pose()
+        here = self.plane.to_geodetic(north_m=pose.north_m, east_m=pose.east_m, down_m=pose.down_m)
+        return pose, here
+
+    def _send_simstate(self) -> None:
+        pose, here = self._truth()
+        self.mav.simstate_send(pose.roll_rad, pose.pitch_rad, pose.yaw_rad, 0.0, 0.0, -9.81, 0.0, 0.0, 0.0,
+                               int(here.latitude_deg * 1e7), int(here.longitude_deg * 1e7))
+
+    def _send_sim_state(self) -> None:
+        pose, here = self._truth()
+        body = self.simulator.dynamics.state
+        self.mav.sim_state_send(1.0, 0.0, 0.0, 0.0, pose.roll_rad, pose.pitch_rad, pose.yaw_rad, 0.0, 0.0, -9.81,
+                                0.0, 0.0, 0.0, here.latitude_deg, here.longitude_deg, here.altitude_amsl_m, 0.0, 0.0,
+                                body.velocity_north_m_s, body.velocity_east_m_s, body.velocity_down_m_s,
+                                int(here.latitude_deg * 1e7), int(here.longitude_deg * 1e7))
+
+    def _send_autopilot_version(self) -> None:
+        capabilities = (mavlink2.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+                        | mavlink2.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                        | mavlink2.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+                        | mavlink2.MAV_PROTOCOL_CAPABILITY_COMMAND_INT)
+        self.mav.autopilot_version_send(capabilities, (4 << 24) | (7 << 16), 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
+                                        0, 0, 0)
+
+    def _flush_status_text(self) -> None:
+        messages = self.simulator.autopilot.messages
+        for status in messages[self._status_sent:]:
+            if self._peer_seen:
+                self.mav.statustext_send(mavlink2.MAV_SEVERITY_INFO, status.text.encode("ascii", "replace")[:50])
+        self._status_sent = len(messages)
+
+    def _say(self, text: str, severity: int = mavlink2.MAV_SEVERITY_WARNING) -> None:
+        self.mav.statustext_send(severity, text.encode("ascii", "replace")[:50])
+
+    def _ack(self, command: int, result: int) -> None:
+        self.mav.command_ack_send(command, result)
+
+    # ---------------------------------------------------------------- incoming
+
+    def _on_command_long(self, message) -> None:
+        command = message.command
+        autopilot = self.simulator.autopilot
+        try:
+            if command == mavlink2.MAV_CMD_COMPONENT_ARM_DISARM:
+                if message.param1 >= 0.5:
+                    autopilot.arm()
+                else:
+                    autopilot.disarm(force=int(message.param2) == 21196, reason="commanded")
+            elif command == mavlink2.MAV_CMD_NAV_TAKEOFF:
+                autopilot.takeoff(altitude_rel_m=message.param7)
+            elif command == mavlink2.MAV_CMD_NAV_LAND:
+                autopilot.set_mode(FlightMode.LAND)
+            elif command == mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+                autopilot.set_mode(FlightMode.RTL)
+            elif command == mavlink2.MAV_CMD_DO_SET_MODE:
+                autopilot.set_mode(self._mode(int(message.param2)))
+            elif command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL:
+                message_id, interval_us = int(message.param1), message.param2
+                if interval_us < 0:
+                    self.intervals_s.pop(message_id, None)
+                elif interval_us == 0:
+                    self.intervals_s[message_id] = 0.1
+                else:
+                    self.intervals_s[message_id] = interval_us / 1e6
+            elif command == mavlink2.MAV_CMD_REQUEST_MESSAGE:
+                if not self.send_message(int(message.param1)):
+                    self._ack(command, _UNSUPPORTED)
+                    return
+            elif command == mavlink2.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+                self.send_message(mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+            else:
+                self._ack(command, _UNSUPPORTED)
+                return
+        except CommandDenied as error:
+            self._say(error.reason)
+            self._ack(command, _DENIED)
+            return
+        except (ValueError, KeyError) as error:
+            self._say(str(error))
+            self._ack(command, _FAILED)
+            return
+        self._ack(command, _ACCEPTED)
+
+    @staticmethod
+    def _mode(custom_mode: int) -> FlightMode:
+        try:
+            return FlightMode(custom_mode)
+        except ValueError:
+            raise CommandDenied(operation="set_mode", reason=f"mode {custom_mode} not supported") from None
+
+    def _on_set_mode(self, message) -> None:
+        try:
+            self.simulator.autopilot.set_mode(self._mode(int(message.custom_mode)))
+        except CommandDenied as error:
+            self._say(error.reason)
+
+    def _on_request_data_stream(self, message) -> None:
+        ids = _DATA_STREAMS.get(message.req_stream_id, ())
+        if message.req_stream_id == mavlink2.MAV_DATA_STREAM_ALL:
+            ids = tuple(i for group in _DATA_STREAMS.values() for i in group)
+        for message_id in ids:
+            if message.start_stop and message.req_message_rate > 0:
+                self.intervals_s[message_id] = 1.0 / message.req_message_rate
+            else:
+                self.intervals_s.pop(message_id, None)
+
+    def _on_set_position_target_local_ned(self, message) -> None:
+        autopilot = self.simulator.autopilot
+        mask = message.type_mask
+        position_ignored = mask & 0b111 == 0b111
+        velocity_ignored = mask & 0b111000 == 0b111000
+        yaw = None if mask & (1 << 10) else message.yaw
+        yaw_rate = 0.0 if mask & (1 << 11) else message.yaw_rate
+        try:
+            if not position_ignored:
+                # LOCAL_NED targets are relative to the EKF origin, as on ArduPilot; goto takes them from home.
+                autopilot.goto(north_m=message.x - autopilot.home_north_m, east_m=message.y - autopilot.home_east_m,
+                               down_m=message.z - autopilot.home_down_m, yaw_rad=yaw)
+            elif not velocity_ignored:
+                vn, ve, vd = message.vx, message.vy, message.vz
+                if message.coordinate_frame in (mavlink2.MAV_FRAME_BODY_NED, mavlink2.MAV_FRAME_BODY_OFFSET_NED,
+                                                mavlink2.MAV_FRAME_BODY_FRD):
+                    yaw_now = autopilot.yaw_rad
+                    vn, ve = (vn * math.cos(yaw_now) - ve * math.sin(yaw_now),
+                              vn * math.sin(yaw_now) + ve * math.cos(yaw_now))
+                autopilot.set_velocity(north_m_s=vn, east_m_s=ve, down_m_s=vd, yaw_rad=yaw, yaw_rate_rad_s=yaw_rate)
+        except CommandDenied as error:
+            self._say(error.reason)
+
+    def _on_set_position_target_global_int(self, message) -> None:
+        autopilot = self.simulator.autopilot
+        north, east, _ = self.plane.to_ned(GeoPoint(message.lat_int / 1e7, message.lon_int / 1e7,
+                                                    self.simulator.origin.altitude_amsl_m))
+        try:
+            autopilot.goto(north_m=north - autopilot.home_north_m, east_m=east - autopilot.home_east_m,
+                           down_m=-message.alt, yaw_rad=None)
+        except CommandDenied as error:
+            self._say(error.reason)
+
+    def _on_landing_target(self, message) -> None:
+        now_s = self.simulator.time_s
+        stamp_s = message.time_usec / 1e6
+        # ArduPilot times a measurement by its arrival; a plausible vehicle-time stamp is used as is.
+        capture_s = stamp_s if now_s - 2.0 <= stamp_s <= now_s else now_s
+        self.landing_targets += 1
+        self.simulator.autopilot.receive_landing_target(LandingTarget(
+            timestamp_s=capture_s, angle_x_rad=message.angle_x, angle_y_rad=message.angle_y,
+            distance_m=message.distance if message.distance > 0 else None, target_num=message.target_num))
+
+    def _param_value(self, name: str) -> None:
+        index = self._param_names.index(name)
+        self.mav.param_value_send(name.encode("ascii"), self.simulator.params.get(name),
+                                  mavlink2.MAV_PARAM_TYPE_REAL32, len(self._param_names), index)
+
+    def _on_param_request_list(self, message) -> None:
+        for name in self._param_names:
+            self._param_value(name)
+
+    def _on_param_request_read(self, message) -> None:
+        name = message.param_id if isinstance(message.param_id, str) else message.param_id.decode()
+        name = name.rstrip("\x00")
+        if message.param_index >= 0 and message.param_index < len(self._param_names) and not name:
+            name = self._param_names[message.param_index]
+        if name in ARDUCOPTER_PARAMS:
+            self._param_value(name)
+
+    def _on_param_set(self, message) -> None:
+        name = message.param_id if isinstance(message.param_id, str) else message.param_id.decode()
+        name = name.rstrip("\x00")
+        if name not in ARDUCOPTER_PARAMS:
+            self._say(f"unknown parameter {name}")
+            return
+        try:
+            self.simulator.params.set(name, message.param_value)
+        except ValueError as error:
+            self._say(str(error))
+        self._param_value(name)  # the value now in force, as ArduPilot answers
+
+
+async def serve(*, simulator: Simulator, clock: Clock, listen: str) -> None:
+    """Serve until cancelled."""
+    await MavlinkFace(simulator=simulator, clock=clock, listen=listen).run()
+

@@ -1,0 +1,143 @@
+"""The embedded simulator's MAVLink face, driven by a plain pymavlink client on localhost."""
+
+import asyncio
+import socket
+import threading
+import time
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from preland_app.clock_scaled import ScaledWallClock
+from preland_app.sim.mavlink_face import MavlinkFace, MavlinkFaceError, parse_listen
+from preland_app.sim.simulator import Simulator
+from preland_app.sim.spec import EnvironmentSpec, WindSpec
+
+SPEEDUP = 10.0
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture()
+def served():
+    """A face on a free localhost port, run in a thread with its own event loop."""
+    port = free_port()
+    simulator = Simulator(seed=3, environment=EnvironmentSpec(wind=WindSpec(speed_m_s=0.0, turbulence_w20_m_s=0.0)))
+    loop = asyncio.new_event_loop()
+    face_box = {}
+
+    def run():
+        asyncio.set_event_loop(loop)
+        face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=SPEEDUP),
+                           listen=f"udp:127.0.0.1:{port}")
+        face_box["face"] = face
+        face_box["task"] = loop.create_task(face.run())
+        try:
+            loop.run_until_complete(face_box["task"])
+        except asyncio.CancelledError:
+            pass
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    client = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega")
+    yield client, simulator, face_box
+    loop.call_soon_threadsafe(face_box["task"].cancel)
+    thread.join(timeout=5)
+    client.close()
+
+
+def wait_for(client, message_type, *, timeout_s=10.0, condition=lambda m: True):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        client.mav.heartbeat_send(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        message = client.recv_match(type=message_type, blocking=True, timeout=0.2)
+        if message is not None and condition(message):
+            return message
+    raise AssertionError(f"no {message_type} within {timeout_s} s")
+
+
+def command(client, command_id, *params, texts=None):
+    """Send COMMAND_LONG and wait for its ACK; STATUSTEXTs that arrive meanwhile go to `texts`."""
+    params = list(params) + [0.0] * (7 - len(params))
+    client.mav.command_long_send(1, 1, command_id, 0, *params)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        message = client.recv_match(type=["COMMAND_ACK", "STATUSTEXT"], blocking=True, timeout=0.2)
+        if message is None:
+            continue
+        if message.get_type() == "STATUSTEXT":
+            if texts is not None:
+                texts.append(message.text)
+        elif message.command == command_id:
+            return message
+    raise AssertionError(f"no COMMAND_ACK for {command_id}")
+
+
+def test_heartbeat_says_ardupilot_copter(served):
+    client, _, _ = served
+    heartbeat = wait_for(client, "HEARTBEAT")
+    assert heartbeat.autopilot == mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA
+    assert heartbeat.type == mavlink2.MAV_TYPE_QUADROTOR
+    assert heartbeat.custom_mode == 0 and not heartbeat.base_mode & mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
+
+
+def test_nothing_streams_until_asked(served):
+    client, _, _ = served
+    wait_for(client, "HEARTBEAT")
+    assert client.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=0.5) is None
+    ack = command(client, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 1e5)
+    assert ack.result == mavlink2.MAV_RESULT_ACCEPTED
+    position = wait_for(client, "GLOBAL_POSITION_INT")
+    assert abs(position.lat / 1e7 - (-35.363261)) < 1e-4
+
+
+def test_param_protocol(served):
+    client, simulator, _ = served
+    wait_for(client, "HEARTBEAT")
+    client.mav.param_request_read_send(1, 1, b"LAND_SPEED", -1)
+    value = wait_for(client, "PARAM_VALUE", condition=lambda m: m.param_id == "LAND_SPEED")
+    assert value.param_value == 50.0 and value.param_count > 30
+    client.mav.param_set_send(1, 1, b"LAND_SPEED", 35.0, mavlink2.MAV_PARAM_TYPE_REAL32)
+    value = wait_for(client, "PARAM_VALUE", condition=lambda m: m.param_id == "LAND_SPEED")
+    assert value.param_value == 35.0 and simulator.params.get("LAND_SPEED") == 35.0
+    client.mav.param_set_send(1, 1, b"LAND_SPEED", 9999.0, mavlink2.MAV_PARAM_TYPE_REAL32)
+    value = wait_for(client, "PARAM_VALUE", condition=lambda m: m.param_id == "LAND_SPEED")
+    assert value.param_value == 35.0  # out of range: refused, the value in force comes back
+
+
+def test_arm_take_off_and_land_over_mavlink(served):
+    client, simulator, face_box = served
+    wait_for(client, "HEARTBEAT")
+    texts = []
+    denied = command(client, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1, texts=texts)
+    assert denied.result == mavlink2.MAV_RESULT_DENIED  # no position estimate yet
+    assert any("Need Position Estimate" in text for text in texts)
+    time.sleep(3.5 / SPEEDUP + 0.2)
+    assert command(client, mavlink2.MAV_CMD_DO_SET_MODE, 1, 4).result == mavlink2.MAV_RESULT_ACCEPTED
+    assert command(client, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink2.MAV_RESULT_ACCEPTED
+    assert command(client, mavlink2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 5).result == mavlink2.MAV_RESULT_ACCEPTED
+    command(client, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 1e5)
+    wait_for(client, "GLOBAL_POSITION_INT", condition=lambda m: m.relative_alt > 4800, timeout_s=15)
+    client.mav.landing_target_send(0, 0, mavlink2.MAV_FRAME_BODY_FRD, 0.01, -0.02, 5.0, 0.0, 0.0)
+    assert command(client, mavlink2.MAV_CMD_DO_SET_MODE, 1, 9).result == mavlink2.MAV_RESULT_ACCEPTED
+    heartbeat = wait_for(client, "HEARTBEAT", timeout_s=20,
+                         condition=lambda m: not m.base_mode & mavlink2.MAV_MODE_FLAG_SAFETY_ARMED)
+    assert heartbeat.custom_mode == 9
+    assert simulator.touchdowns() and simulator.true_pose().on_ground
+    assert face_box["face"].landing_targets == 1
+    command(client, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink2.MAVLINK_MSG_ID_SIMSTATE, 1e5)
+    truth = wait_for(client, "SIMSTATE")
+    assert abs(truth.lat / 1e7 - (-35.363261)) < 1e-4
+
+
+def test_unknown_commands_and_bad_addresses(served):
+    client, _, _ = served
+    wait_for(client, "HEARTBEAT")
+    assert command(client, mavlink2.MAV_CMD_DO_FLIGHTTERMINATION, 1).result == mavlink2.MAV_RESULT_UNSUPPORTED
+    with pytest.raises(MavlinkFaceError, match="udp:HOST:PORT"):
+        parse_listen("tcp:localhost")
