@@ -9,9 +9,9 @@ it. Like ArduPilot it streams nothing but HEARTBEAT until asked
 requests), SET_MODE, SET_POSITION_TARGET_LOCAL_NED (positions and velocities,
 local and body frames), SET_POSITION_TARGET_GLOBAL_INT, LANDING_TARGET and the
 PARAM protocol, and sends HEARTBEAT (ArduPilot autopilot, Copter custom
-modes), SYS_STATUS, GLOBAL_POSITION_INT, LOCAL_POSITION_NED, ATTITUDE,
-HOME_POSITION, EXTENDED_SYS_STATE, STATUSTEXT, COMMAND_ACK, PARAM_VALUE, and
-SIMSTATE / SIM_STATE with the ground truth.
+modes), SYS_STATUS, GPS_RAW_INT, GLOBAL_POSITION_INT, LOCAL_POSITION_NED,
+ATTITUDE, HOME_POSITION, EXTENDED_SYS_STATE, DISTANCE_SENSOR, STATUSTEXT,
+COMMAND_ACK, PARAM_VALUE, and SIMSTATE / SIM_STATE with the ground truth.
 """
 
 from __future__ import annotations
@@ -38,7 +38,8 @@ _DATA_STREAMS = {
                                         mavlink2.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
     mavlink2.MAV_DATA_STREAM_EXTRA1: (mavlink2.MAVLINK_MSG_ID_ATTITUDE, mavlink2.MAVLINK_MSG_ID_SIMSTATE),
     mavlink2.MAV_DATA_STREAM_EXTENDED_STATUS: (mavlink2.MAVLINK_MSG_ID_SYS_STATUS,
-                                               mavlink2.MAVLINK_MSG_ID_EXTENDED_SYS_STATE),
+                                               mavlink2.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+                                               mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT),
 }
 _LANDED_STATE = {LandedState.ON_GROUND: 1, LandedState.IN_AIR: 2, LandedState.TAKING_OFF: 3,
                  LandedState.LANDING: 4, LandedState.UNDEFINED: 0}
@@ -75,7 +76,7 @@ class MavlinkFace:
             raise MavlinkFaceError(f"--listen {listen!r}: {error.strerror or error}") from None
         self.mav = self.connection.mav
         self.plane = LocalTangentPlane(simulator.origin)
-        self.heartbeats_enabled = True
+        self.heartbeats_enabled = True  # a test can silence them to simulate a lost link
         self.intervals_s: dict[int, float] = {k: 1.0 / v for k, v in _STREAMS_DEFAULT_HZ.items()}
         self._next_send_s: dict[int, float] = {}
         self._messages_sent = 0
@@ -140,6 +141,8 @@ class MavlinkFace:
             mavlink2.MAVLINK_MSG_ID_SIMSTATE: self._send_simstate,
             mavlink2.MAVLINK_MSG_ID_SIM_STATE: self._send_sim_state,
             mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._send_autopilot_version,
+            mavlink2.MAVLINK_MSG_ID_DISTANCE_SENSOR: self._send_distance_sensor,
+            mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT: self._send_gps_raw,
         }.get(message_id)
         if sender is None:
             return False
@@ -223,6 +226,21 @@ class MavlinkFace:
                                 0.0, 0.0, 0.0, here.latitude_deg, here.longitude_deg, here.altitude_amsl_m, 0.0, 0.0,
                                 body.velocity_north_m_s, body.velocity_east_m_s, body.velocity_down_m_s,
                                 int(here.latitude_deg * 1e7), int(here.longitude_deg * 1e7))
+
+    def _send_distance_sensor(self) -> None:
+        nav = self.simulator.nav
+        params = self.simulator.params
+        minimum, maximum = int(params.value("RNGFND1_MIN_CM")), int(params.value("RNGFND1_MAX_CM"))
+        current = int(nav.rangefinder_m * 100) if nav.rangefinder_m is not None else maximum + 1
+        self.mav.distance_sensor_send(self.time_boot_ms(), minimum, maximum, current,
+                                      mavlink2.MAV_DISTANCE_SENSOR_LASER, 0, mavlink2.MAV_SENSOR_ROTATION_PITCH_270, 0)
+
+    def _send_gps_raw(self) -> None:
+        nav, here, _ = self._estimate()
+        fix = mavlink2.GPS_FIX_TYPE_3D_FIX if nav.position_ok else mavlink2.GPS_FIX_TYPE_NO_FIX
+        self.mav.gps_raw_int_send(int(self.simulator.time_s * 1e6), fix, int(here.latitude_deg * 1e7),
+                                  int(here.longitude_deg * 1e7), int(here.altitude_amsl_m * 1000), 80, 120, 0, 0,
+                                  14 if nav.position_ok else 0)
 
     def _send_autopilot_version(self) -> None:
         capabilities = (mavlink2.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT

@@ -1,0 +1,362 @@
+"""The Vehicle protocol over MAVLink, for ArduPilot Copter (SITL or a real drone) and `preland sim serve`.
+
+MAVSDK (the `mavsdk` 4.x package) does the link: connection URLs, system
+discovery, the PARAM protocol (Param plugin) and commands with their
+COMMAND_ACK retries (MavlinkDirect.send_command). Everything else goes through
+MAVSDK's MavlinkDirect plugin as plain MAVLink messages, because ArduPilot's
+GUIDED mode, custom flight modes and LANDING_TARGET in MAV_FRAME_BODY_FRD have
+no dedicated MAVSDK API, and reading the raw messages keeps the autopilot's own
+timestamps (time_boot_ms), which the vehicle clock follows.
+
+Positions: LOCAL_POSITION_NED is relative to the EKF origin; the protocol's
+NED positions are relative to home (HOME_POSITION's x, y, z from the origin).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import time
+from typing import Any
+
+from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
+from .types import (
+    Attitude,
+    Battery,
+    FlightMode,
+    GlobalPosition,
+    LandedState,
+    LandingTarget,
+    PositionNed,
+    Telemetry,
+    VelocityNed,
+)
+
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_FRAME_LOCAL_NED = 1
+MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 6
+MAV_FRAME_BODY_NED = 8
+MAV_FRAME_BODY_FRD = 12
+POSITION_ONLY = 0b0000_1001_1111_1000  # position (and yaw when given) only
+VELOCITY_ONLY = 0b0000_1001_1100_0111
+YAW_IGNORED = 1 << 10
+YAW_RATE_IGNORED = 1 << 11
+_LANDED = {0: LandedState.UNDEFINED, 1: LandedState.ON_GROUND, 2: LandedState.IN_AIR, 3: LandedState.TAKING_OFF,
+           4: LandedState.LANDING}
+STREAMS_HZ = {"GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 10, "ATTITUDE": 10, "EXTENDED_SYS_STATE": 5,
+              "SYS_STATUS": 2, "GPS_RAW_INT": 2, "HOME_POSITION": 1, "DISTANCE_SENSOR": 10}
+MESSAGE_IDS = {"GLOBAL_POSITION_INT": 33, "LOCAL_POSITION_NED": 32, "ATTITUDE": 30, "EXTENDED_SYS_STATE": 245,
+               "SYS_STATUS": 1, "GPS_RAW_INT": 24, "HOME_POSITION": 242, "DISTANCE_SENSOR": 132, "SIM_STATE": 108}
+
+
+class VehicleTimeClock:
+    """The autopilot's clock (time_boot_ms), interpolated between messages at the measured rate.
+
+    The rate is vehicle seconds per wall second (1 for a real drone, the
+    speed-up for SITL), estimated over the last seconds of messages, so a 30 s
+    timer is 30 vehicle seconds on every runtime.
+    """
+
+    def __init__(self) -> None:
+        self._samples: list[tuple[float, float]] = []  # (wall s, vehicle s)
+        self.rate = 1.0
+
+    def observe(self, vehicle_s: float) -> None:
+        wall = time.monotonic()
+        if self._samples and vehicle_s < self._samples[-1][1] - 1.0:
+            self._samples.clear()  # the autopilot rebooted
+        self._samples.append((wall, vehicle_s))
+        while len(self._samples) > 2 and wall - self._samples[0][0] > 3.0:
+            self._samples.pop(0)
+        (w0, v0), (w1, v1) = self._samples[0], self._samples[-1]
+        if w1 - w0 > 0.5 and v1 > v0:
+            self.rate = (v1 - v0) / (w1 - w0)
+
+    @property
+    def ready(self) -> bool:
+        return bool(self._samples)
+
+    def now_s(self) -> float:
+        if not self._samples:
+            return 0.0
+        wall, vehicle = self._samples[-1]
+        return vehicle + (time.monotonic() - wall) * self.rate
+
+    async def sleep(self, duration_s: float) -> None:
+        await asyncio.sleep(max(0.0, duration_s) / max(self.rate, 1e-3))
+
+
+class MavlinkVehicle:
+    """A Vehicle over a MAVLink connection URL (udp://:14550, udpout://host:port, tcp://host:port,
+    serial:///dev/ttyAMA0:921600), for ArduPilot Copter."""
+
+    def __init__(self, *, url: str, connect_timeout_s: float = 30.0, link_timeout_s: float = 5.0,
+                 want_truth: bool = False) -> None:
+        self.url = url
+        self.connect_timeout_s = connect_timeout_s
+        self.link_timeout_s = link_timeout_s
+        self.want_truth = want_truth
+        self._clock = VehicleTimeClock()
+        self._messages: dict[str, dict[str, Any]] = {}
+        self._status_texts: list[str] = []
+        self._last_heartbeat_wall: float | None = None
+        self._sdk = None
+        self._direct = None
+        self._param = None
+        self._tasks: list[asyncio.Task] = []
+        self._closed = False
+        self.system_id = 1
+
+    @property
+    def clock(self) -> VehicleTimeClock:
+        return self._clock
+
+    # ---------------------------------------------------------------- link
+
+    async def connect(self) -> None:
+        from mavsdk.asyncio.mavsdk import Configuration, Mavsdk
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+        from mavsdk.asyncio.plugins.param import ParamAsync
+        from mavsdk.component_type import ComponentType
+
+        self._sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER))
+        try:
+            await self._sdk.add_any_connection(self.url)
+        except Exception as error:
+            raise VehicleError(operation="connect", reason=f"{self.url}: {error}") from None
+        system = await self._sdk.first_autopilot(timeout_s=self.connect_timeout_s)
+        if system is None:
+            raise LinkLost(operation="connect", reason=f"no autopilot on {self.url} within "
+                                                        f"{self.connect_timeout_s:g} s")
+        self._direct = MavlinkDirectAsync(system)
+        self._param = ParamAsync(system)
+        self._tasks.append(asyncio.ensure_future(self._listen()))
+        deadline = time.monotonic() + self.connect_timeout_s
+        while not self._clock.ready or "HEARTBEAT" not in self._messages:
+            if time.monotonic() > deadline:
+                raise LinkLost(operation="connect", reason="no telemetry from the autopilot")
+            await self._request_streams()
+            await asyncio.sleep(0.2)
+        await self._request_streams()
+
+    async def _request_streams(self) -> None:
+        streams = dict(STREAMS_HZ)
+        if self.want_truth:
+            streams["SIM_STATE"] = 20
+        for name, rate_hz in streams.items():
+            await self._command(MAV_CMD_SET_MESSAGE_INTERVAL, MESSAGE_IDS[name], 1e6 / rate_hz,
+                                operation="set_message_interval", check=False)
+
+    async def _listen(self) -> None:
+        async for message in self._direct.subscribe_message(""):
+            if message.system_id != self.system_id:
+                continue
+            try:
+                fields = json.loads(message.fields_json)
+            except ValueError:
+                continue
+            name = message.message_name
+            self._messages[name] = fields
+            if name == "HEARTBEAT":
+                self._last_heartbeat_wall = time.monotonic()
+            elif name == "STATUSTEXT":
+                self._status_texts.append(str(fields.get("text", "")))
+            if "time_boot_ms" in fields:
+                self._clock.observe(fields["time_boot_ms"] / 1000.0)
+
+    def _check_link(self, operation: str) -> None:
+        if self._closed or self._direct is None:
+            raise VehicleError(operation=operation, reason="not connected")
+        if self._last_heartbeat_wall is not None:
+            silent_vehicle_s = (time.monotonic() - self._last_heartbeat_wall) * self._clock.rate
+            if silent_vehicle_s > self.link_timeout_s:
+                raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
+
+    async def close(self) -> None:
+        self._closed = True
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self._sdk is not None:
+            try:
+                await self._sdk.destroy()
+            except Exception:  # closing must not fail a trial
+                pass
+            self._sdk = None
+
+    # ---------------------------------------------------------------- sending
+
+    async def _send(self, name: str, fields: dict[str, Any]) -> None:
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        payload = {"target_system": self.system_id, "target_component": 1, **fields}
+        await self._direct.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
+                                                       target_component_id=1, fields_json=json.dumps(payload)))
+
+    async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> None:
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        values = list(params) + [0.0] * (7 - len(params))
+        fields = {"target_system": self.system_id, "target_component": 1, "command": command, "confirmation": 0,
+                  **{f"param{i + 1}": float(v) for i, v in enumerate(values)}}
+        texts_before = len(self._status_texts)
+        try:
+            ack = await self._direct.send_command(MavlinkMessage(
+                message_name="COMMAND_LONG", target_system_id=self.system_id, target_component_id=1,
+                fields_json=json.dumps(fields)))
+        except Exception as error:
+            if check:
+                raise LinkLost(operation=operation, reason=f"no COMMAND_ACK ({error})") from None
+            return
+        result = json.loads(ack.fields_json or "{}").get("result", 0)
+        if check and result != 0:
+            await asyncio.sleep(0.05)  # ArduPilot sends its reason as STATUSTEXT around the ack
+            reasons = [t for t in self._status_texts[texts_before:] if t]
+            raise CommandDenied(operation=operation,
+                                reason=reasons[-1] if reasons else f"MAV_RESULT {result}")
+
+    # ---------------------------------------------------------------- the protocol
+
+    async def arm(self) -> None:
+        self._check_link("arm")
+        await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 1, operation="arm")
+
+    async def disarm(self) -> None:
+        self._check_link("disarm")
+        await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 0, operation="disarm")
+
+    async def takeoff(self, *, altitude_rel_m: float) -> None:
+        self._check_link("takeoff")
+        await self._command(MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude_rel_m, operation="takeoff")
+
+    async def set_mode(self, mode: FlightMode) -> None:
+        self._check_link("set_mode")
+        await self._command(MAV_CMD_DO_SET_MODE, 1, mode.value, operation="set_mode")
+
+    def _home_local(self) -> tuple[float, float, float]:
+        home = self._messages.get("HOME_POSITION")
+        return (home["x"], home["y"], home["z"]) if home else (0.0, 0.0, 0.0)
+
+    async def goto_ned(self, *, position_ned_m: PositionNed, yaw_deg: float | None = None) -> None:
+        self._check_link("goto_ned")
+        hx, hy, hz = self._home_local()
+        mask = POSITION_ONLY | (YAW_IGNORED if yaw_deg is None else 0)
+        await self._send("SET_POSITION_TARGET_LOCAL_NED", {
+            "time_boot_ms": int(self._clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_LOCAL_NED,
+            "type_mask": mask, "x": hx + position_ned_m.north_m, "y": hy + position_ned_m.east_m,
+            "z": hz + position_ned_m.down_m, "yaw": math.radians(yaw_deg or 0.0)})
+
+    async def goto_global(self, *, latitude_deg: float, longitude_deg: float, altitude_rel_m: float) -> None:
+        self._check_link("goto_global")
+        await self._send("SET_POSITION_TARGET_GLOBAL_INT", {
+            "time_boot_ms": int(self._clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            "type_mask": POSITION_ONLY | YAW_IGNORED, "lat_int": int(latitude_deg * 1e7),
+            "lon_int": int(longitude_deg * 1e7), "alt": altitude_rel_m})
+
+    async def set_velocity_ned(self, *, velocity_ned_m_s: VelocityNed, yaw_deg: float | None = None) -> None:
+        self._check_link("set_velocity_ned")
+        mask = VELOCITY_ONLY | (YAW_IGNORED if yaw_deg is None else 0)
+        await self._send("SET_POSITION_TARGET_LOCAL_NED", {
+            "time_boot_ms": int(self._clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_LOCAL_NED,
+            "type_mask": mask, "vx": velocity_ned_m_s.north_m_s, "vy": velocity_ned_m_s.east_m_s,
+            "vz": velocity_ned_m_s.down_m_s, "yaw": math.radians(yaw_deg or 0.0)})
+
+    async def set_velocity_body(self, *, forward_m_s: float, right_m_s: float, down_m_s: float,
+                                yaw_rate_deg_s: float = 0.0) -> None:
+        self._check_link("set_velocity_body")
+        mask = VELOCITY_ONLY & ~YAW_RATE_IGNORED
+        await self._send("SET_POSITION_TARGET_LOCAL_NED", {
+            "time_boot_ms": int(self._clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_BODY_NED,
+            "type_mask": mask, "vx": forward_m_s, "vy": right_m_s, "vz": down_m_s,
+            "yaw_rate": math.radians(yaw_rate_deg_s)})
+
+    async def hold(self) -> None:
+        self._check_link("hold")
+        local = self._messages.get("LOCAL_POSITION_NED")
+        if local is None:
+            raise VehicleError(operation="hold", reason="no position yet")
+        hx, hy, hz = self._home_local()
+        await self.goto_ned(position_ned_m=PositionNed(local["x"] - hx, local["y"] - hy, local["z"] - hz))
+
+    async def get_param(self, name: str) -> float:
+        self._check_link("get_param")
+        try:
+            return float(await self._param.get_param_float(name))
+        except Exception as error:
+            raise CommandDenied(operation="get_param", reason=f"{name}: {error}") from None
+
+    async def set_param(self, name: str, value: float) -> None:
+        self._check_link("set_param")
+        try:
+            await self._param.set_param_float(name, float(value))
+        except Exception as error:
+            raise CommandDenied(operation="set_param", reason=f"{name}={value:g}: {error}") from None
+        read = await self.get_param(name)
+        if abs(read - float(value)) > 1e-4 * max(1.0, abs(float(value))):
+            raise CommandDenied(operation="set_param", reason=f"{name} reads back {read:g}, not {value:g}")
+
+    async def telemetry(self) -> Telemetry:
+        self._check_link("telemetry")
+        m = self._messages
+        heartbeat = m.get("HEARTBEAT", {})
+        glob = m.get("GLOBAL_POSITION_INT", {})
+        local = m.get("LOCAL_POSITION_NED", {})
+        attitude = m.get("ATTITUDE", {})
+        status = m.get("SYS_STATUS", {})
+        home = m.get("HOME_POSITION")
+        gps = m.get("GPS_RAW_INT", {})
+        distance = m.get("DISTANCE_SENSOR")
+        hx, hy, hz = self._home_local()
+        try:
+            mode = FlightMode(int(heartbeat.get("custom_mode", 0)))
+        except ValueError:
+            mode = FlightMode.STABILIZE
+        relative_m = glob.get("relative_alt", 0) / 1000.0
+        rangefinder_valid = bool(distance) and distance["min_distance"] <= distance["current_distance"] <= \
+            distance["max_distance"]
+        height_m = distance["current_distance"] / 100.0 if rangefinder_valid else relative_m
+        return Telemetry(
+            time_s=self._clock.now_s(),
+            armed=bool(int(heartbeat.get("base_mode", 0)) & 128),
+            mode=mode,
+            landed_state=_LANDED.get(int(m.get("EXTENDED_SYS_STATE", {}).get("landed_state", 0)),
+                                     LandedState.UNDEFINED),
+            position_ok=int(gps.get("fix_type", 0)) >= 3,
+            position_ned_m=PositionNed(local.get("x", 0.0) - hx, local.get("y", 0.0) - hy, local.get("z", 0.0) - hz),
+            velocity_ned_m_s=VelocityNed(glob.get("vx", 0) / 100.0, glob.get("vy", 0) / 100.0,
+                                         glob.get("vz", 0) / 100.0),
+            global_position=GlobalPosition(glob.get("lat", 0) / 1e7, glob.get("lon", 0) / 1e7,
+                                           glob.get("alt", 0) / 1000.0, relative_m),
+            home=GlobalPosition(home["latitude"] / 1e7, home["longitude"] / 1e7, home["altitude"] / 1000.0, 0.0)
+            if home else GlobalPosition(0.0, 0.0, 0.0, 0.0),
+            attitude=Attitude(math.degrees(attitude.get("roll", 0.0)), math.degrees(attitude.get("pitch", 0.0)),
+                              math.degrees(attitude.get("yaw", 0.0)) % 360.0),
+            height_above_ground_m=height_m,
+            rangefinder_valid=rangefinder_valid,
+            battery=Battery(status.get("voltage_battery", 0) / 1000.0, float(status.get("battery_remaining", -1))),
+        )
+
+    async def send_landing_target(self, target: LandingTarget) -> None:
+        self._check_link("send_landing_target")
+        await self._send("LANDING_TARGET", {
+            "time_usec": int(target.timestamp_s * 1e6), "target_num": target.target_num,
+            "frame": MAV_FRAME_BODY_FRD, "angle_x": target.angle_x_rad, "angle_y": target.angle_y_rad,
+            "distance": target.distance_m or 0.0, "size_x": target.size_x_rad, "size_y": target.size_y_rad})
+
+    # ---------------------------------------------------------------- truth (SITL and the simulator's face)
+
+    def sim_state(self) -> dict[str, Any] | None:
+        """The latest SIM_STATE (ground truth from SITL or the simulator), if asked for and received."""
+        return self._messages.get("SIM_STATE")
+
+    async def wait_for_truth(self, timeout_s: float = 10.0) -> dict[str, Any]:
+        deadline = time.monotonic() + timeout_s
+        while self.sim_state() is None:
+            if time.monotonic() > deadline:
+                raise WaitTimeout(operation="ground truth (SIM_STATE)", timeout_s=timeout_s)
+            await asyncio.sleep(0.05)
+        return self.sim_state()
