@@ -110,8 +110,14 @@ def fly(
         None, "--takeoff-altitude-m", help="Take-off altitude above home in m, overriding the mission's."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
     events: bool = typer.Option(False, "--events", help="Include the mission's event log."),
+    connect: Optional[str] = typer.Option(
+        None, "--connect", metavar="URL",
+        help="Fly over MAVLink instead of the embedded simulator: udp://:14550, udpout://127.0.0.1:14550, "
+             "tcp://127.0.0.1:5760, serial:///dev/ttyAMA0:921600."),
+    no_truth: bool = typer.Option(False, "--no-truth",
+                                  help="With --connect: the vehicle reports no ground truth (a real drone)."),
 ) -> None:
-    """Fly a mission once on the embedded simulator and print its outcome."""
+    """Fly a mission once (on the embedded simulator, or over MAVLink) and print its outcome."""
     from .config.mission import load_mission
     from .errors import SpecValueError
     from .runtime.embedded import TrialRequest, run_trial
@@ -135,7 +141,17 @@ def fly(
         option = {"sensor": "--sensor", "mode": "--land"}.get(error.field, "--fault")
         raise fail(f"{option}: {error.problem}") from None
 
-    outcome = run_trial(request)
+    if connect is not None:
+        from .runtime.mavlink import run_mavlink_trial
+
+        try:
+            outcome = run_mavlink_trial(request, url=connect, truth=not no_truth)
+        except PrelandError as error:
+            raise fail(f"--connect {connect}: {error}", code=EXIT_FAILED) from None
+        except KeyboardInterrupt:
+            raise fail("interrupted", code=130) from None
+    else:
+        outcome = run_trial(request)
     data = outcome.to_dict(include_events=events)
     if as_json:
         typer.echo(json.dumps(data, sort_keys=True))

@@ -23,6 +23,7 @@ class Outcome(enum.Enum):
     ABORTED = "aborted"
     TIMED_OUT = "timed_out"
     CRASHED = "crashed"
+    LINK_LOST = "link_lost"
     ERROR = "error"
 
     @property
@@ -32,6 +33,7 @@ class Outcome(enum.Enum):
             Outcome.ABORTED: "the mission stopped before landing",
             Outcome.TIMED_OUT: "a step did not finish within its timeout",
             Outcome.CRASHED: "the vehicle hit the ground too hard or tilted over",
+            Outcome.LINK_LOST: "the link to the vehicle was lost",
             Outcome.ERROR: "the trial failed with an error",
         }[self]
 

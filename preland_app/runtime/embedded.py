@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..clock import LoopClock, run_virtual
 from ..config.mission import MissionSpec
-from ..errors import MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
+from ..errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
 from ..events import EventLog
 from ..landing.base import ScoringReference
 from ..mission import MissionReport, MissionRunner
@@ -57,7 +58,11 @@ async def fly_embedded(request: TrialRequest) -> TrialOutcome:
                           initial_yaw_deg=mission.initial_yaw_deg)
     vehicle = SimVehicle(simulator=simulator, clock=clock)
     events = EventLog(clock)
-    sensors = build_sensor_suite(mission=mission, seed=request.seed, simulator=simulator, clock=clock,
+    def true_pose() -> CameraPose:
+        pose = simulator.true_pose()
+        return CameraPose(pose.north_m, pose.east_m, pose.down_m, pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
+
+    sensors = build_sensor_suite(mission=mission, seed=request.seed, true_pose=true_pose, clock=clock,
                                  camera=strategy.uses_marker, irlock=strategy.uses_irlock)
     runner = MissionRunner(spec=mission, vehicle=vehicle, strategy=strategy, events=events,
                            rng=child_rng(request.seed, "landing"), sensors=sensors,
@@ -79,6 +84,8 @@ async def fly_embedded(request: TrialRequest) -> TrialOutcome:
         outcome, message = Outcome.ABORTED, str(error)
     except VehicleCrashed as error:
         outcome, message = Outcome.CRASHED, str(error)
+    except LinkLost as error:
+        outcome, message = Outcome.LINK_LOST, str(error)
     except PrelandError as error:
         outcome, message = Outcome.ERROR, f"{type(error).__name__}: {error}"
     except Exception as error:  # a bug must still end as this trial's outcome, not kill a campaign
@@ -94,19 +101,16 @@ async def fly_embedded(request: TrialRequest) -> TrialOutcome:
                   trajectory=recorder.array() if request.record_trajectory else None)
 
 
-def build_sensor_suite(*, mission: MissionSpec, seed: int, simulator: Simulator, clock, camera: bool,
-                       irlock: bool) -> SensorSuite:
-    """The companion's sensors on the embedded simulator: they see the world through the true pose."""
+def build_sensor_suite(*, mission: MissionSpec, seed: int, true_pose: Callable[[], CameraPose], clock,
+                       camera: bool, irlock: bool) -> SensorSuite:
+    """The companion's simulated sensors: they see the world through `true_pose` (NED from the start
+    position, from the embedded simulator or from SITL's SIM_STATE); what they give is images and readings."""
     spec = mission.sensors
     suite = SensorSuite(spec=spec)
     if not (camera or irlock):
         return suite
     pad = mission.pad_spec()
     pad_origin = mission.pad.offset_from_start_ned_m
-
-    def true_pose() -> CameraPose:
-        pose = simulator.true_pose()
-        return CameraPose(pose.north_m, pose.east_m, pose.down_m, pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
 
     if camera:
         model = spec.camera.model(relative_to=mission.base_dir)

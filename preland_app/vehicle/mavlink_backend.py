@@ -80,6 +80,11 @@ class VehicleTimeClock:
     def ready(self) -> bool:
         return bool(self._samples)
 
+    @property
+    def settled(self) -> bool:
+        """True once the rate has been measured over at least a second of messages."""
+        return len(self._samples) > 2 and self._samples[-1][0] - self._samples[0][0] >= 1.0
+
     def now_s(self) -> float:
         if not self._samples:
             return 0.0
@@ -88,6 +93,16 @@ class VehicleTimeClock:
 
     async def sleep(self, duration_s: float) -> None:
         await asyncio.sleep(max(0.0, duration_s) / max(self.rate, 1e-3))
+
+
+def _quiet_mavsdk_logs() -> None:
+    """Keep MAVSDK's own log lines to warnings and errors (its debug output would drown the CLI's)."""
+    from mavsdk.logging import LogLevel, log_subscribe
+
+    def handler(level: LogLevel, message: str, file: str | None, line: int) -> bool:
+        return level < LogLevel.WARN  # True suppresses MAVSDK's default printing
+
+    log_subscribe(handler)
 
 
 class MavlinkVehicle:
@@ -110,6 +125,9 @@ class MavlinkVehicle:
         self._tasks: list[asyncio.Task] = []
         self._closed = False
         self.system_id = 1
+        # HEARTBEAT comes at 1 Hz: an accepted arm/disarm or mode change holds until the next one confirms it.
+        self._commanded_armed: tuple[bool, float] | None = None
+        self._commanded_mode: tuple[FlightMode, float] | None = None
 
     @property
     def clock(self) -> VehicleTimeClock:
@@ -118,6 +136,7 @@ class MavlinkVehicle:
     # ---------------------------------------------------------------- link
 
     async def connect(self) -> None:
+        _quiet_mavsdk_logs()
         from mavsdk.asyncio.mavsdk import Configuration, Mavsdk
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.asyncio.plugins.param import ParamAsync
@@ -136,7 +155,7 @@ class MavlinkVehicle:
         self._param = ParamAsync(system)
         self._tasks.append(asyncio.ensure_future(self._listen()))
         deadline = time.monotonic() + self.connect_timeout_s
-        while not self._clock.ready or "HEARTBEAT" not in self._messages:
+        while not self._clock.settled or "HEARTBEAT" not in self._messages:
             if time.monotonic() > deadline:
                 raise LinkLost(operation="connect", reason="no telemetry from the autopilot")
             await self._request_streams()
@@ -224,10 +243,12 @@ class MavlinkVehicle:
     async def arm(self) -> None:
         self._check_link("arm")
         await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 1, operation="arm")
+        self._commanded_armed = (True, time.monotonic())
 
     async def disarm(self) -> None:
         self._check_link("disarm")
         await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 0, operation="disarm")
+        self._commanded_armed = (False, time.monotonic())
 
     async def takeoff(self, *, altitude_rel_m: float) -> None:
         self._check_link("takeoff")
@@ -236,6 +257,7 @@ class MavlinkVehicle:
     async def set_mode(self, mode: FlightMode) -> None:
         self._check_link("set_mode")
         await self._command(MAV_CMD_DO_SET_MODE, 1, mode.value, operation="set_mode")
+        self._commanded_mode = (mode, time.monotonic())
 
     def _home_local(self) -> tuple[float, float, float]:
         home = self._messages.get("HOME_POSITION")
@@ -315,13 +337,19 @@ class MavlinkVehicle:
             mode = FlightMode(int(heartbeat.get("custom_mode", 0)))
         except ValueError:
             mode = FlightMode.STABILIZE
+        armed = bool(int(heartbeat.get("base_mode", 0)) & 128)
+        heartbeat_wall = self._last_heartbeat_wall or 0.0
+        if self._commanded_armed is not None and self._commanded_armed[1] > heartbeat_wall:
+            armed = self._commanded_armed[0]
+        if self._commanded_mode is not None and self._commanded_mode[1] > heartbeat_wall:
+            mode = self._commanded_mode[0]
         relative_m = glob.get("relative_alt", 0) / 1000.0
         rangefinder_valid = bool(distance) and distance["min_distance"] <= distance["current_distance"] <= \
             distance["max_distance"]
         height_m = distance["current_distance"] / 100.0 if rangefinder_valid else relative_m
         return Telemetry(
             time_s=self._clock.now_s(),
-            armed=bool(int(heartbeat.get("base_mode", 0)) & 128),
+            armed=armed,
             mode=mode,
             landed_state=_LANDED.get(int(m.get("EXTENDED_SYS_STATE", {}).get("landed_state", 0)),
                                      LandedState.UNDEFINED),

@@ -1,0 +1,135 @@
+"""Run one trial over MAVLink: ArduPilot SITL, a real drone, or `preland sim serve`.
+
+The mission, land mode and sensors are the embedded runtime's; only the
+vehicle differs (`MavlinkVehicle`) and the clock is the autopilot's. Where the
+vehicle reports ground truth (SIM_STATE, from SITL or the simulator's MAVLink
+face), the virtual camera and the IR-LOCK model see the world through it and
+the landing is scored from it; without truth (a real drone) the outcome has no
+landing error: the operator measures it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+from ..errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
+from ..events import EventLog
+from ..geo import GeoPoint, LocalTangentPlane
+from ..landing.base import ScoringReference
+from ..mission import MissionRunner
+from ..outcome import Outcome, TrialOutcome, score_touchdown
+from ..sensing.virtual_camera import CameraPose
+from ..sim.noise import child_rng
+from ..vehicle.mavlink_backend import MavlinkVehicle
+from .embedded import TrialRequest, build_sensor_suite
+from .recorder import TrajectoryRecorder
+
+ON_GROUND_M = 0.05
+
+
+class SimStateTruth:
+    """Ground truth from SIM_STATE: NED in m from where the vehicle stood when the trial started."""
+
+    def __init__(self, vehicle: MavlinkVehicle) -> None:
+        self.vehicle = vehicle
+        self._plane: LocalTangentPlane | None = None
+
+    @staticmethod
+    def _point(state: dict) -> GeoPoint:
+        # The float lat/lon fields are float32 (about 0.4 m steps); the int extensions carry 1e-7 degrees.
+        if state.get("lat_int") or state.get("lon_int"):
+            return GeoPoint(state["lat_int"] / 1e7, state["lon_int"] / 1e7, state["alt"])
+        return GeoPoint(state["lat"], state["lon"], state["alt"])
+
+    def start(self) -> None:
+        self._plane = LocalTangentPlane(self._point(self.vehicle.sim_state()))
+
+    def pose(self) -> CameraPose:
+        state = self.vehicle.sim_state()
+        north, east, down = self._plane.to_ned(self._point(state))
+        return CameraPose(north, east, down, state["roll"], state["pitch"], state["yaw"])
+
+    def ned(self) -> tuple[float, float, float]:
+        pose = self.pose()
+        return pose.north_m, pose.east_m, -pose.down_m
+
+
+async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True,
+                      link_timeout_s: float = 5.0) -> TrialOutcome:
+    """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time)."""
+    mission = request.resolved_mission()
+    strategy = mission.land.strategy()
+    vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s)
+    clock = vehicle.clock
+    events = EventLog(clock)
+    await vehicle.connect()
+    truth_source = None
+    if truth:
+        await vehicle.wait_for_truth()
+        truth_source = SimStateTruth(vehicle)
+        truth_source.start()
+    sensors = build_sensor_suite(mission=mission, seed=request.seed,
+                                 true_pose=truth_source.pose if truth_source else _no_truth, clock=clock,
+                                 camera=strategy.uses_marker, irlock=strategy.uses_irlock)
+    runner = MissionRunner(spec=mission, vehicle=vehicle, strategy=strategy, events=events,
+                           rng=child_rng(request.seed, "landing"), sensors=sensors,
+                           takeoff_altitude_rel_m=request.takeoff_altitude_rel_m)
+    recorder = TrajectoryRecorder(vehicle=vehicle, clock=clock, truth=truth_source.ned if truth_source else None)
+    recording = asyncio.ensure_future(recorder.run())
+    outcome, message = Outcome.LANDED, Outcome.LANDED.description
+    try:
+        await runner.run()
+    except WaitTimeout as error:
+        outcome, message = Outcome.TIMED_OUT, str(error)
+    except LinkLost as error:
+        outcome, message = Outcome.LINK_LOST, str(error)
+    except MissionAborted as error:
+        outcome, message = Outcome.ABORTED, str(error)
+    except VehicleCrashed as error:
+        outcome, message = Outcome.CRASHED, str(error)
+    except PrelandError as error:
+        outcome, message = Outcome.ERROR, f"{type(error).__name__}: {error}"
+    except Exception as error:  # a bug is this trial's outcome, not a crash of the campaign
+        outcome, message = Outcome.ERROR, f"unexpected {type(error).__name__}: {error}"
+    finally:
+        recording.cancel()
+        await asyncio.gather(recording, return_exceptions=True)
+        await vehicle.close()
+    trajectory = recorder.array()
+    score = touchdown = None
+    landing_time_s = None
+    command = events.first("land_command")
+    if truth_source is not None and outcome is Outcome.LANDED and len(trajectory):
+        final = trajectory[-1]
+        reference = (mission.pad.offset_from_start_ned_m if strategy.scoring_reference is ScoringReference.PAD
+                     else (0.0, 0.0))
+        score = score_touchdown(touchdown_ned_m=(final[4], final[5]), reference_ned_m=reference)
+        on_ground = [row for row in trajectory if command is not None and row[0] >= command.time_s
+                     and row[6] <= ON_GROUND_M]
+        touchdown = on_ground[0] if on_ground else None
+        if touchdown is not None:
+            landing_time_s = float(touchdown[0] - command.time_s)
+    armed = events.first("armed")
+    flight_time_s = (runner.report.disarmed_time_s - armed.time_s
+                     if armed is not None and runner.report.disarmed_time_s is not None else None)
+    details = dict(runner.report.landing.details) if runner.report.landing else {}
+    details["runtime"] = "mavlink"
+    details["clock_rate"] = round(clock.rate, 2)
+    return TrialOutcome(
+        outcome=outcome, message=message, seed=request.seed, mission=mission.name, land_mode=mission.land.mode,
+        takeoff_altitude_rel_m=runner.takeoff_altitude_rel_m, scoring_reference=strategy.scoring_reference.value,
+        landing_error_cm=score.landing_error_cm if score else None,
+        offset_north_cm=score.offset_north_cm if score else None,
+        offset_east_cm=score.offset_east_cm if score else None,
+        landing_time_s=landing_time_s, flight_time_s=flight_time_s, details=details, events=tuple(events.events),
+        trajectory=trajectory)
+
+
+def _no_truth() -> CameraPose:
+    raise PrelandError("this runtime has no ground truth: simulated sensors cannot be used (use a real camera)")
+
+
+def run_mavlink_trial(request: TrialRequest, *, url: str, truth: bool = True) -> TrialOutcome:
+    return asyncio.run(fly_mavlink(request, url=url, truth=truth))
+
+

@@ -1,0 +1,95 @@
+"""The whole mission over MAVLink (MAVSDK) against the simulator's MAVLink face on localhost."""
+
+import asyncio
+import threading
+
+import pytest
+
+from preland_app.clock_scaled import ScaledWallClock
+from preland_app.outcome import Outcome
+from preland_app.runtime.embedded import TrialRequest
+from preland_app.runtime.mavlink import fly_mavlink
+from preland_app.sim.mavlink_face import MavlinkFace
+from preland_app.sim.simulator import Simulator
+
+from .test_mavlink_face import free_port
+
+SPEEDUP = 6.0
+
+
+class ServedSimulator:
+    """A MavlinkFace in a background thread with its own event loop."""
+
+    def __init__(self, mission, seed: int) -> None:
+        self.port = free_port()
+        self.simulator = Simulator(seed=seed, environment=mission.environment, params=dict(mission.params),
+                                   initial_yaw_deg=mission.initial_yaw_deg)
+        self.loop = asyncio.new_event_loop()
+        self.face = None
+        self._task = None
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        asyncio.set_event_loop(self.loop)
+        self.face = MavlinkFace(simulator=self.simulator, clock=ScaledWallClock(speedup=SPEEDUP),
+                                listen=f"udp:127.0.0.1:{self.port}")
+        self._task = self.loop.create_task(self.face.run())
+        try:
+            self.loop.run_until_complete(self._task)
+        except asyncio.CancelledError:
+            pass
+
+    @property
+    def url(self) -> str:
+        return f"udpout://127.0.0.1:{self.port}"
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self.loop.call_soon_threadsafe(self._task.cancel)
+        self._thread.join(timeout=5)
+
+
+@pytest.mark.parametrize("mode", ["normal", "irlock"])
+def test_thesis_mission_over_mavlink(thesis_mission, mode):
+    served = ServedSimulator(thesis_mission, seed=4)
+    try:
+        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=thesis_mission, seed=4, land_mode=mode), url=served.url))
+    finally:
+        served.stop()
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    assert outcome.details["runtime"] == "mavlink" and outcome.details["clock_rate"] > 2.0
+    kinds = [e.kind for e in outcome.events]
+    assert kinds.count("waypoint") == 4 and "disarmed" in kinds
+    # Scored from the simulator's truth (SIM_STATE), as in-process runs are.
+    truth = served.simulator.touchdowns()[-1]
+    reference = (2.0, 0.0) if mode == "irlock" else (0.0, 0.0)
+    expected_cm = 100 * ((truth.north_m - reference[0]) ** 2 + (truth.east_m - reference[1]) ** 2) ** 0.5
+    assert outcome.landing_error_cm == pytest.approx(expected_cm, abs=3.0)
+    if mode == "irlock":
+        assert outcome.landing_error_cm < 15.0 and served.face.landing_targets > 100
+    else:
+        assert 5.0 < outcome.landing_error_cm < 300.0
+    assert 15.0 < outcome.landing_time_s < 40.0
+
+
+def test_lost_heartbeat_ends_the_trial_as_link_lost(thesis_mission):
+    served = ServedSimulator(thesis_mission, seed=5)
+
+    async def main():
+        trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=thesis_mission, seed=5), url=served.url))
+        while served.simulator.autopilot.landed_state().name != "IN_AIR":
+            await asyncio.sleep(0.05)
+        silenced_at = served.simulator.time_s
+        served.face.heartbeats_enabled = False
+        outcome = await asyncio.wait_for(trial, timeout=30)
+        return outcome, silenced_at, served.simulator.time_s
+
+    try:
+        outcome, silenced_at, ended_at = asyncio.run(main())
+    finally:
+        served.stop()
+    assert outcome.outcome is Outcome.LINK_LOST and "no heartbeat for" in outcome.message
+    # The last heartbeat came up to 1 s before the silence; the link counts as lost after 5 vehicle seconds.
+    assert ended_at - silenced_at <= 5.0 + 1.0, (silenced_at, ended_at)
+    assert ended_at - silenced_at >= 3.5
