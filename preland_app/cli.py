@@ -116,6 +116,12 @@ def fly(
              "tcp://127.0.0.1:5760, serial:///dev/ttyAMA0:921600."),
     no_truth: bool = typer.Option(False, "--no-truth",
                                   help="With --connect: the vehicle reports no ground truth (a real drone)."),
+    sitl: Optional[str] = typer.Option(None, "--sitl", metavar="PATH",
+                                       help="Fly on a fresh ArduPilot SITL process (arducopter binary; "
+                                            "default $PRELAND_SITL_BINARY when --sitl is given empty)."),
+    sitl_speedup: float = typer.Option(10.0, "--sitl-speedup", help="SITL --speedup."),
+    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="ArduPilot parameter defaults files "
+                                             "(e.g. copter.parm), repeatable."),
 ) -> None:
     """Fly a mission once (on the embedded simulator, or over MAVLink) and print its outcome."""
     from .config.mission import load_mission
@@ -141,7 +147,18 @@ def fly(
         option = {"sensor": "--sensor", "mode": "--land"}.get(error.field, "--fault")
         raise fail(f"{option}: {error.problem}") from None
 
-    if connect is not None:
+    if sitl is not None:
+        from .runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial
+
+        try:
+            options = SitlOptions(binary=resolve_sitl_binary(sitl or None), speedup=sitl_speedup,
+                                  defaults=tuple(sitl_defaults))
+            outcome = run_sitl_trial(request, options=options)
+        except PrelandError as error:
+            raise fail(f"--sitl: {error}", code=EXIT_FAILED) from None
+        except KeyboardInterrupt:
+            raise fail("interrupted", code=130) from None
+    elif connect is not None:
         from .runtime.mavlink import run_mavlink_trial
 
         try:
@@ -220,8 +237,14 @@ def campaign_run(
     resume: bool = typer.Option(False, "--resume", help="Finish a campaign already in --db; no trial runs twice."),
     report: Optional[Path] = typer.Option(None, "--report", help="Write the campaign's report to this folder."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+    sitl: Optional[str] = typer.Option(None, "--sitl", metavar="PATH",
+                                       help="Run each trial on a fresh ArduPilot SITL process (arducopter binary, "
+                                            "or $PRELAND_SITL_BINARY when given empty)."),
+    sitl_speedup: float = typer.Option(10.0, "--sitl-speedup", help="SITL --speedup."),
+    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="ArduPilot parameter defaults files "
+                                             "(e.g. copter.parm), repeatable."),
 ) -> None:
-    """Run every trial of a campaign on the embedded simulator, storing each as it finishes."""
+    """Run every trial of a campaign (embedded simulator, or SITL with --sitl), storing each as it finishes."""
     import os
     import time
 
@@ -235,6 +258,15 @@ def campaign_run(
         raise fail(str(error)) from None
     if workers is not None and workers < 1:
         raise fail(f"--workers: must be >= 1, got {workers}")
+    sitl_options = None
+    if sitl is not None:
+        from .runtime.sitl import SitlOptions, resolve_sitl_binary
+
+        try:
+            sitl_options = SitlOptions(binary=resolve_sitl_binary(sitl or None), speedup=sitl_speedup,
+                                       defaults=tuple(p.resolve() for p in sitl_defaults))
+        except PrelandError as error:
+            raise fail(f"--sitl: {error}") from None
     store = _open_store(db, must_exist=False)
     started = time.perf_counter()
     failures: list[str] = []
@@ -246,7 +278,7 @@ def campaign_run(
                     failures.append(f"{record.scenario} #{record.trial_index}: {record.result.get('message')}")
 
             ran, total = run_campaign(campaign, store, workers=workers or os.cpu_count() or 1, resume=resume,
-                                      progress=progress)
+                                      progress=progress, sitl=sitl_options)
     except CampaignInterrupted as error:
         store.close()
         typer.echo(f"preland: {error}", err=True)

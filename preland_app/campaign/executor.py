@@ -27,6 +27,7 @@ from ..config.mission import MissionSpec
 from ..errors import PrelandError
 from ..outcome import TRAJECTORY_COLUMNS, Outcome
 from ..runtime.embedded import TrialRequest, run_trial
+from ..runtime.sitl import SitlOptions, run_sitl_trial
 from .spec import CampaignSpec, ResolvedScenario, resolve_scenarios, spec_hash
 from .store import ResultsStore, StoreError, TrialRecord
 
@@ -54,6 +55,7 @@ class TrialJob:
     spec_hash: str
     mission: MissionSpec
     takeoff_altitude_rel_m: float
+    sitl: SitlOptions | None = None
 
 
 def derive_seed(base_seed: int, scenario: str, trial_index: int) -> int:
@@ -62,11 +64,12 @@ def derive_seed(base_seed: int, scenario: str, trial_index: int) -> int:
     return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
 
 
-def plan_trials(campaign: CampaignSpec, scenarios: list[ResolvedScenario]) -> list[TrialJob]:
+def plan_trials(campaign: CampaignSpec, scenarios: list[ResolvedScenario], *,
+                sitl: SitlOptions | None = None) -> list[TrialJob]:
     return [
         TrialJob(campaign=campaign.name, scenario=s.spec.label, scenario_index=s.index, trial_index=i,
                  seed=derive_seed(campaign.base_seed, s.spec.label, i), spec_hash=s.spec_hash, mission=s.mission,
-                 takeoff_altitude_rel_m=s.takeoff_altitude_rel_m)
+                 takeoff_altitude_rel_m=s.takeoff_altitude_rel_m, sitl=sitl)
         for s in scenarios for i in range(s.trials)
     ]
 
@@ -90,15 +93,17 @@ def run_job(job: TrialJob) -> TrialRecord:
     started = time.perf_counter()
     common = dict(campaign=job.campaign, scenario=job.scenario, scenario_index=job.scenario_index,
                   trial_index=job.trial_index, seed=job.seed, spec_hash=job.spec_hash)
+    request = TrialRequest(mission=job.mission, seed=job.seed, takeoff_altitude_rel_m=job.takeoff_altitude_rel_m)
+    runtime = "sitl" if job.sitl is not None else "embedded"
     try:
-        outcome = run_trial(TrialRequest(mission=job.mission, seed=job.seed,
-                                         takeoff_altitude_rel_m=job.takeoff_altitude_rel_m))
+        outcome = run_sitl_trial(request, options=job.sitl) if job.sitl is not None else run_trial(request)
     except Exception as error:  # a bug in a trial is that trial's outcome; the campaign goes on
         last = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
         where = f" at {Path(last.filename).name}:{last.lineno}" if last else ""
         result = {"outcome": Outcome.ERROR.value, "message": f"{type(error).__name__}: {error}{where}",
                   "mission": job.mission.name, "land_mode": job.mission.land.mode, "details": {}}
-        return TrialRecord(**common, result=result, wall_time_s=time.perf_counter() - started)
+        return TrialRecord(**common, result=result, runtime=runtime, source="sitl" if job.sitl else "sim",
+                           wall_time_s=time.perf_counter() - started)
     data = outcome.to_dict(include_events=True)
     land = job.mission.land
     result = {key: data.get(key) for key in data}
@@ -107,6 +112,7 @@ def run_job(job: TrialJob) -> TrialRecord:
     result["takeoff_altitude_m"] = data["takeoff_altitude_rel_m"]
     return TrialRecord(**common, result=result, events=tuple(data["events"]),
                        trajectory_columns=TRAJECTORY_COLUMNS, trajectory_rows=_downsample(outcome.trajectory),
+                       runtime=runtime, source="sitl" if job.sitl else "sim",
                        wall_time_s=time.perf_counter() - started)
 
 
@@ -125,10 +131,11 @@ Progress = Callable[[int, int, TrialRecord | None], None]
 
 
 def run_campaign(campaign: CampaignSpec, store: ResultsStore, *, workers: int | None = None, resume: bool = False,
-                 progress: Progress | None = None) -> tuple[int, int]:
-    """Run the campaign's pending trials. Returns (trials run now, trials in the campaign)."""
+                 progress: Progress | None = None, sitl: SitlOptions | None = None) -> tuple[int, int]:
+    """Run the campaign's pending trials (on the embedded simulator, or on SITL binaries).
+    Returns (trials run now, trials in the campaign)."""
     scenarios = resolve_scenarios(campaign)
-    jobs = plan_trials(campaign, scenarios)
+    jobs = plan_trials(campaign, scenarios, sitl=sitl)
     done = store.done_keys(campaign.name)
     if done and not resume:
         raise StoreError(f"campaign {campaign.name!r} already has {len(done)} trial(s) in {store.path}; "

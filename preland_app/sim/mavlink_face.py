@@ -54,12 +54,13 @@ class MavlinkFaceError(PrelandError):
 
 
 def parse_listen(address: str) -> str:
-    """`udp:HOST:PORT` (or `udpin:`) -> a pymavlink `udpin:HOST:PORT` connection string."""
+    """`udp:HOST:PORT` (or `udpin:`) -> pymavlink `udpin:HOST:PORT`; `udpclient:HOST:PORT` (or `udpout:`, as
+    SITL's --serial0 says it) -> pymavlink `udpout:HOST:PORT`, which sends first."""
     scheme, _, rest = address.partition(":")
     host, _, port = rest.rpartition(":")
-    if scheme not in ("udp", "udpin") or not host or not port.isdigit():
+    if scheme not in ("udp", "udpin", "udpclient", "udpout") or not host or not port.isdigit():
         raise MavlinkFaceError(f"--listen {address!r}: expected udp:HOST:PORT, e.g. udp:127.0.0.1:14550")
-    return f"udpin:{host}:{port}"
+    return f"{'udpout' if scheme in ('udpclient', 'udpout') else 'udpin'}:{host}:{port}"
 
 
 class MavlinkFace:
@@ -80,7 +81,8 @@ class MavlinkFace:
         self.intervals_s: dict[int, float] = {k: 1.0 / v for k, v in _STREAMS_DEFAULT_HZ.items()}
         self._next_send_s: dict[int, float] = {}
         self._messages_sent = 0
-        self._peer_seen = False
+        # Sending first (udpclient) needs no peer to have spoken; listening waits for one.
+        self._peer_seen = parse_listen(listen).startswith("udpout")
         self.landing_targets = 0
         self._param_names = sorted(ARDUCOPTER_PARAMS)
         self._status_sent = 0

@@ -1,0 +1,190 @@
+"""ArduPilot SITL binaries as a runtime: one fresh `arducopter` process per trial.
+
+Each trial gets its own SITL instance number (`-I N`, so parallel workers never
+share ports) held by a lock file, a temporary working folder (SITL writes its
+EEPROM and logs there), `--speedup`, the mission's home, ArduPilot's default
+copter parameters (`--defaults`, when given) plus the trial's parameters in a
+file of their own (precision landing from a companion, PLND_TYPE=1, needs a
+reboot to take effect, so it goes in at launch), and the scenario's wind as
+SIM_WIND_* parameters. SITL sends MAVLink to a UDP port the trial listens on
+(`--serial0 udpclient:127.0.0.1:PORT`). The process runs in its own process
+group, dies with the process that launched it (PR_SET_PDEATHSIG), and is
+stopped, group and all, when the trial ends, fails or is interrupted.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ctypes
+import fcntl
+import os
+import signal
+import socket
+import subprocess
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..config.mission import MissionSpec
+from ..errors import PrelandError
+from ..outcome import TrialOutcome
+from ..sim.spec import DEFAULT_HOME
+from .embedded import TrialRequest
+from .mavlink import fly_mavlink
+
+SITL_ENV = "PRELAND_SITL_BINARY"
+MAX_INSTANCES = 64
+STOP_GRACE_S = 3.0
+
+
+class SitlError(PrelandError):
+    """The SITL binary is missing, not executable, or did not start."""
+
+
+def resolve_sitl_binary(path: str | Path | None) -> Path:
+    """The SITL binary from `path` or $PRELAND_SITL_BINARY; one clear error when it cannot be used."""
+    chosen = path or os.environ.get(SITL_ENV)
+    if not chosen:
+        raise SitlError(f"no SITL binary: give --sitl PATH or set {SITL_ENV}")
+    binary = Path(chosen).expanduser()
+    if not binary.is_file():
+        raise SitlError(f"SITL binary {binary} not found")
+    if not os.access(binary, os.X_OK):
+        raise SitlError(f"SITL binary {binary} is not executable")
+    return binary
+
+
+@dataclass(frozen=True)
+class SitlOptions:
+    binary: Path
+    speedup: float = 10.0
+    defaults: tuple[Path, ...] = ()
+    extra_params: dict[str, float] = field(default_factory=dict)
+
+
+def sim_params(mission: MissionSpec, seed: int) -> dict[str, float]:
+    """The scenario's wind as ArduPilot SITL parameters (SIM_WIND_SPD in m/s, SIM_WIND_DIR in deg,
+    SIM_WIND_TURB in m/s: the gusts' standard deviation along the wind)."""
+    import numpy as np
+
+    wind = mission.environment.wind
+    direction = wind.direction_from_deg
+    if direction is None:
+        direction = float(np.random.default_rng(seed).uniform(0.0, 360.0))
+    return {"SIM_WIND_SPD": wind.speed_m_s, "SIM_WIND_DIR": direction,
+            "SIM_WIND_TURB": 0.1 * wind.turbulence_w20_m_s}
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _die_with_parent() -> None:
+    os.setsid()  # a process group of its own, so the whole group can be stopped
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+class SitlInstance:
+    """One running SITL process (use `async with`)."""
+
+    def __init__(self, *, options: SitlOptions, params: dict[str, float], home=DEFAULT_HOME,
+                 heading_deg: float = 0.0) -> None:
+        self.options = options
+        self.params = params
+        self.home = home
+        self.heading_deg = heading_deg
+        self.instance: int | None = None
+        self.port = _free_udp_port()
+        self.process: subprocess.Popen | None = None
+        self._lock_file = None
+        self._folder: tempfile.TemporaryDirectory | None = None
+
+    @property
+    def url(self) -> str:
+        return f"udpin://127.0.0.1:{self.port}"
+
+    def _claim_instance(self) -> int:
+        for number in range(MAX_INSTANCES):
+            handle = open(Path(tempfile.gettempdir()) / f"preland-sitl-{number}.lock", "w")
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                handle.close()
+                continue
+            self._lock_file = handle
+            return number
+        raise SitlError(f"no free SITL instance number (all {MAX_INSTANCES} in use)")
+
+    def command(self, folder: Path) -> list[str]:
+        params_file = folder / "preland.parm"
+        params_file.write_text("".join(f"{name} {value:g}\n" for name, value in sorted(self.params.items())))
+        defaults = ",".join(str(p) for p in (*self.options.defaults, params_file))
+        home = f"{self.home.latitude_deg},{self.home.longitude_deg},{self.home.altitude_amsl_m},{self.heading_deg:g}"
+        return [str(self.options.binary), "--model", "+", "--speedup", f"{self.options.speedup:g}",
+                "--defaults", defaults, "-I", str(self.instance), f"--home={home}",
+                "--serial0", f"udpclient:127.0.0.1:{self.port}"]
+
+    async def __aenter__(self) -> "SitlInstance":
+        self.instance = self._claim_instance()
+        self._folder = tempfile.TemporaryDirectory(prefix=f"preland-sitl-{self.instance}-")
+        folder = Path(self._folder.name)
+        try:
+            self.process = subprocess.Popen(self.command(folder), cwd=folder, stdin=subprocess.DEVNULL,
+                                            stdout=subprocess.DEVNULL, stderr=open(folder / "stderr.txt", "wb"),
+                                            preexec_fn=_die_with_parent)
+        except OSError as error:
+            self._release()
+            raise SitlError(f"cannot start {self.options.binary}: {error.strerror or error}") from None
+        await asyncio.sleep(0.2)
+        if self.process.poll() is not None:
+            tail = (folder / "stderr.txt").read_text(errors="replace").strip().splitlines()[-1:] or [""]
+            code = self.process.returncode
+            self._release()
+            raise SitlError(f"{self.options.binary} exited at once (code {code}) {tail[0]}".strip())
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        process = self.process
+        if process is not None and process.poll() is None:
+            try:
+                os.killpg(process.pid, signal.SIGTERM)
+                process.wait(timeout=STOP_GRACE_S)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                try:
+                    os.killpg(process.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                process.wait(timeout=STOP_GRACE_S)
+        self._release()
+
+    def _release(self) -> None:
+        if self._lock_file is not None:
+            self._lock_file.close()
+            self._lock_file = None
+        if self._folder is not None:
+            self._folder.cleanup()
+            self._folder = None
+
+
+async def fly_sitl(request: TrialRequest, *, options: SitlOptions) -> TrialOutcome:
+    """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE)."""
+    mission = request.resolved_mission()
+    params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **sim_params(mission, request.seed), **mission.params,
+              **options.extra_params}
+    async with SitlInstance(options=options, params=params, heading_deg=mission.initial_yaw_deg) as sitl:
+        outcome = await fly_mavlink(request, url=sitl.url, truth=True)
+    outcome.details["runtime"] = "sitl"
+    outcome.details["sitl_instance"] = sitl.instance
+    return outcome
+
+
+def run_sitl_trial(request: TrialRequest, *, options: SitlOptions) -> TrialOutcome:
+    return asyncio.run(fly_sitl(request, options=options))

@@ -1,0 +1,46 @@
+#!/usr/bin/env python3
+"""A stand-in for ArduPilot's `arducopter` SITL binary, for tests: it takes SITL's command line and serves
+preland's embedded simulator over MAVLink to the --serial0 udpclient address. It writes its pid and
+arguments to $FAKE_SITL_LOG_DIR (when set) so tests can check what was launched and that it is gone."""
+
+import argparse
+import asyncio
+import json
+import os
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from preland_app.clock_scaled import ScaledWallClock  # noqa: E402
+from preland_app.geo import GeoPoint  # noqa: E402
+from preland_app.sim.mavlink_face import MavlinkFace  # noqa: E402
+from preland_app.sim.simulator import Simulator  # noqa: E402
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--model")
+    parser.add_argument("--speedup", type=float, default=1.0)
+    parser.add_argument("--defaults", default="")
+    parser.add_argument("-I", dest="instance", type=int, default=0)
+    parser.add_argument("--home")
+    parser.add_argument("--serial0")
+    args = parser.parse_args()
+    log_dir = os.environ.get("FAKE_SITL_LOG_DIR")
+    if log_dir:
+        Path(log_dir, f"{os.getpid()}.json").write_text(json.dumps({"pid": os.getpid(), "argv": sys.argv[1:]}))
+    params = {}
+    for path in filter(None, args.defaults.split(",")):
+        for line in Path(path).read_text().splitlines():
+            name, _, value = line.partition(" ")
+            if name and not name.startswith(("#", "SIM_")):
+                params[name] = float(value)
+    lat, lon, alt, heading = (float(v) for v in args.home.split(","))
+    simulator = Simulator(seed=args.instance, origin=GeoPoint(lat, lon, alt), params=params, initial_yaw_deg=heading)
+    face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=args.speedup), listen=args.serial0)
+    asyncio.run(face.run())
+
+
+if __name__ == "__main__":
+    main()
