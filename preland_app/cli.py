@@ -122,6 +122,8 @@ def fly(
     sitl_speedup: float = typer.Option(10.0, "--sitl-speedup", help="SITL --speedup."),
     sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="ArduPilot parameter defaults files "
                                              "(e.g. copter.parm), repeatable."),
+    tlog: Optional[Path] = typer.Option(None, "--tlog", help="With --connect or --sitl: write a MAVLink "
+                                        "telemetry log (.tlog) of the trial."),
 ) -> None:
     """Fly a mission once (on the embedded simulator, or over MAVLink) and print its outcome."""
     from .config.mission import load_mission
@@ -152,8 +154,8 @@ def fly(
 
         try:
             options = SitlOptions(binary=resolve_sitl_binary(sitl or None), speedup=sitl_speedup,
-                                  defaults=tuple(sitl_defaults))
-            outcome = run_sitl_trial(request, options=options)
+                                  defaults=tuple(sitl_defaults), tlog_dir=tlog.parent if tlog else None)
+            outcome = run_sitl_trial(request, options=options, tlog_name=tlog.name if tlog else None)
         except PrelandError as error:
             raise fail(f"--sitl: {error}", code=EXIT_FAILED) from None
         except KeyboardInterrupt:
@@ -162,7 +164,8 @@ def fly(
         from .runtime.mavlink import run_mavlink_trial
 
         try:
-            outcome = run_mavlink_trial(request, url=connect, truth=not no_truth)
+            outcome = run_mavlink_trial(request, url=connect, truth=not no_truth,
+                                        tlog_path=str(tlog) if tlog else None)
         except PrelandError as error:
             raise fail(f"--connect {connect}: {error}", code=EXIT_FAILED) from None
         except KeyboardInterrupt:
@@ -243,6 +246,8 @@ def campaign_run(
     sitl_speedup: float = typer.Option(10.0, "--sitl-speedup", help="SITL --speedup."),
     sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="ArduPilot parameter defaults files "
                                              "(e.g. copter.parm), repeatable."),
+    tlog_dir: Optional[Path] = typer.Option(None, "--tlog-dir", help="With --sitl: one MAVLink telemetry log "
+                                            "(.tlog) per trial in this folder."),
 ) -> None:
     """Run every trial of a campaign (embedded simulator, or SITL with --sitl), storing each as it finishes."""
     import os
@@ -264,7 +269,8 @@ def campaign_run(
 
         try:
             sitl_options = SitlOptions(binary=resolve_sitl_binary(sitl or None), speedup=sitl_speedup,
-                                       defaults=tuple(p.resolve() for p in sitl_defaults))
+                                       defaults=tuple(p.resolve() for p in sitl_defaults),
+                                       tlog_dir=tlog_dir.resolve() if tlog_dir else None)
         except PrelandError as error:
             raise fail(f"--sitl: {error}") from None
     store = _open_store(db, must_exist=False)

@@ -43,10 +43,13 @@ def _alive(pid: int) -> bool:
     return "State:\tZ" not in status
 
 
-def test_a_trial_on_sitl_launches_a_fresh_instance_and_stops_it(fake_sitl, thesis_mission):
+def test_a_trial_on_sitl_launches_a_fresh_instance_and_stops_it(fake_sitl, thesis_mission, tmp_path):
+    from pymavlink import mavutil
+
     script, logs = fake_sitl
     outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
-                             options=SitlOptions(binary=script, speedup=8.0))
+                             options=SitlOptions(binary=script, speedup=8.0, tlog_dir=tmp_path / "tlogs"),
+                             tlog_name="trial.tlog")
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert outcome.details["runtime"] == "sitl" and 20.0 < outcome.landing_error_cm < 300.0
     (launch,) = _launches(logs)
@@ -55,6 +58,13 @@ def test_a_trial_on_sitl_launches_a_fresh_instance_and_stops_it(fake_sitl, thesi
     assert any(a.startswith("--home=-35.363261,149.16523,584") for a in argv)
     assert argv[argv.index("--serial0") + 1].startswith("udpclient:127.0.0.1:")
     assert not _alive(launch["pid"])
+    # The trial's telemetry log reads back with pymavlink's tools.
+    log = mavutil.mavlink_connection(str(tmp_path / "tlogs" / "trial.tlog"))
+    types = set()
+    while (message := log.recv_match()) is not None:
+        types.add(message.get_type())
+    assert {"HEARTBEAT", "GLOBAL_POSITION_INT", "ATTITUDE", "COMMAND_ACK"} <= types
+    assert outcome.details["tlog_messages"] > 500
 
 
 def test_a_missing_binary_gives_one_line(tmp_path, monkeypatch):

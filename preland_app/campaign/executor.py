@@ -96,7 +96,11 @@ def run_job(job: TrialJob) -> TrialRecord:
     request = TrialRequest(mission=job.mission, seed=job.seed, takeoff_altitude_rel_m=job.takeoff_altitude_rel_m)
     runtime = "sitl" if job.sitl is not None else "embedded"
     try:
-        outcome = run_sitl_trial(request, options=job.sitl) if job.sitl is not None else run_trial(request)
+        if job.sitl is not None:
+            tlog_name = f"{job.campaign}_s{job.scenario_index}_t{job.trial_index}.tlog"
+            outcome = run_sitl_trial(request, options=job.sitl, tlog_name=tlog_name)
+        else:
+            outcome = run_trial(request)
     except Exception as error:  # a bug in a trial is that trial's outcome; the campaign goes on
         last = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
         where = f" at {Path(last.filename).name}:{last.lineno}" if last else ""

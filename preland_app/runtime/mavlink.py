@@ -54,12 +54,13 @@ class SimStateTruth:
         return pose.north_m, pose.east_m, -pose.down_m
 
 
-async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True,
-                      link_timeout_s: float = 5.0) -> TrialOutcome:
-    """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time)."""
+async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, link_timeout_s: float = 5.0,
+                      tlog_path: str | None = None) -> TrialOutcome:
+    """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time).
+    `tlog_path`: write every MAVLink message received to this telemetry log."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
-    vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s)
+    vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path)
     clock = vehicle.clock
     events = EventLog(clock)
     await vehicle.connect()
@@ -115,6 +116,9 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True,
     details = dict(runner.report.landing.details) if runner.report.landing else {}
     details["runtime"] = "mavlink"
     details["clock_rate"] = round(clock.rate, 2)
+    if vehicle.tlog is not None:
+        details["tlog"] = str(vehicle.tlog.path)
+        details["tlog_messages"] = vehicle.tlog.written
     return TrialOutcome(
         outcome=outcome, message=message, seed=request.seed, mission=mission.name, land_mode=mission.land.mode,
         takeoff_altitude_rel_m=runner.takeoff_altitude_rel_m, scoring_reference=strategy.scoring_reference.value,
@@ -129,7 +133,8 @@ def _no_truth() -> CameraPose:
     raise PrelandError("this runtime has no ground truth: simulated sensors cannot be used (use a real camera)")
 
 
-def run_mavlink_trial(request: TrialRequest, *, url: str, truth: bool = True) -> TrialOutcome:
-    return asyncio.run(fly_mavlink(request, url=url, truth=truth))
+def run_mavlink_trial(request: TrialRequest, *, url: str, truth: bool = True,
+                      tlog_path: str | None = None) -> TrialOutcome:
+    return asyncio.run(fly_mavlink(request, url=url, truth=truth, tlog_path=tlog_path))
 
 

@@ -56,10 +56,14 @@ def resolve_sitl_binary(path: str | Path | None) -> Path:
 
 @dataclass(frozen=True)
 class SitlOptions:
+    """How to run SITL: the binary, its --speedup, --defaults files, extra parameters, and a folder for
+    one .tlog per trial (None: no logs)."""
+
     binary: Path
     speedup: float = 10.0
     defaults: tuple[Path, ...] = ()
     extra_params: dict[str, float] = field(default_factory=dict)
+    tlog_dir: Path | None = None
 
 
 def sim_params(mission: MissionSpec, seed: int) -> dict[str, float]:
@@ -174,17 +178,20 @@ class SitlInstance:
             self._folder = None
 
 
-async def fly_sitl(request: TrialRequest, *, options: SitlOptions) -> TrialOutcome:
+async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: str | None = None) -> TrialOutcome:
     """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE)."""
     mission = request.resolved_mission()
     params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **sim_params(mission, request.seed), **mission.params,
               **options.extra_params}
     async with SitlInstance(options=options, params=params, heading_deg=mission.initial_yaw_deg) as sitl:
-        outcome = await fly_mavlink(request, url=sitl.url, truth=True)
+        tlog_path = None
+        if options.tlog_dir is not None:
+            tlog_path = str(Path(options.tlog_dir) / (tlog_name or f"{mission.name}_seed{request.seed}.tlog"))
+        outcome = await fly_mavlink(request, url=sitl.url, truth=True, tlog_path=tlog_path)
     outcome.details["runtime"] = "sitl"
     outcome.details["sitl_instance"] = sitl.instance
     return outcome
 
 
-def run_sitl_trial(request: TrialRequest, *, options: SitlOptions) -> TrialOutcome:
-    return asyncio.run(fly_sitl(request, options=options))
+def run_sitl_trial(request: TrialRequest, *, options: SitlOptions, tlog_name: str | None = None) -> TrialOutcome:
+    return asyncio.run(fly_sitl(request, options=options, tlog_name=tlog_name))

@@ -21,6 +21,7 @@ import time
 from typing import Any
 
 from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
+from .tlog import TlogWriter
 from .types import (
     Attitude,
     Battery,
@@ -110,8 +111,9 @@ class MavlinkVehicle:
     serial:///dev/ttyAMA0:921600), for ArduPilot Copter."""
 
     def __init__(self, *, url: str, connect_timeout_s: float = 30.0, link_timeout_s: float = 5.0,
-                 want_truth: bool = False) -> None:
+                 want_truth: bool = False, tlog_path: str | None = None) -> None:
         self.url = url
+        self.tlog = TlogWriter(tlog_path) if tlog_path else None
         self.connect_timeout_s = connect_timeout_s
         self.link_timeout_s = link_timeout_s
         self.want_truth = want_truth
@@ -172,13 +174,16 @@ class MavlinkVehicle:
 
     async def _listen(self) -> None:
         async for message in self._direct.subscribe_message(""):
-            if message.system_id != self.system_id:
-                continue
             try:
                 fields = json.loads(message.fields_json)
             except ValueError:
                 continue
             name = message.message_name
+            if self.tlog is not None:
+                self.tlog.write(name=name, fields=fields, system_id=message.system_id,
+                                component_id=message.component_id)
+            if message.system_id != self.system_id:
+                continue
             self._messages[name] = fields
             if name == "HEARTBEAT":
                 self._last_heartbeat_wall = time.monotonic()
@@ -200,6 +205,8 @@ class MavlinkVehicle:
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self.tlog is not None:
+            self.tlog.close()
         if self._sdk is not None:
             try:
                 await self._sdk.destroy()
