@@ -20,7 +20,8 @@ SPEEDUP = 6.0
 class ServedSimulator:
     """A MavlinkFace in a background thread with its own event loop."""
 
-    def __init__(self, mission, seed: int) -> None:
+    def __init__(self, mission, seed: int, speedup: float = SPEEDUP) -> None:
+        self.speedup = speedup
         self.port = free_port()
         self.simulator = Simulator(seed=seed, environment=mission.environment, params=dict(mission.params),
                                    initial_yaw_deg=mission.initial_yaw_deg)
@@ -32,7 +33,7 @@ class ServedSimulator:
 
     def _run(self) -> None:
         asyncio.set_event_loop(self.loop)
-        self.face = MavlinkFace(simulator=self.simulator, clock=ScaledWallClock(speedup=SPEEDUP),
+        self.face = MavlinkFace(simulator=self.simulator, clock=ScaledWallClock(speedup=self.speedup),
                                 listen=f"udp:127.0.0.1:{self.port}")
         self._task = self.loop.create_task(self.face.run())
         try:
@@ -71,6 +72,40 @@ def test_thesis_mission_over_mavlink(thesis_mission, mode):
     else:
         assert 5.0 < outcome.landing_error_cm < 300.0
     assert 15.0 < outcome.landing_time_s < 40.0
+
+
+@pytest.mark.parametrize("mode, faults", [
+    ("marker", None), ("fused", None), ("cautious", {"marker": "below:3:first-attempt"}),
+])
+def test_camera_land_modes_over_mavlink(thesis_mission, mode, faults):
+    # The camera renders and detects in real time here, so the vehicle runs slower.
+    served = ServedSimulator(thesis_mission, seed=4, speedup=3.0)
+    try:
+        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=thesis_mission, seed=4, land_mode=mode, faults=faults),
+                                          url=served.url))
+    finally:
+        served.stop()
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    assert outcome.landing_error_cm < 15.0
+    assert served.face.landing_targets == outcome.details["landing_targets_sent"] > 100
+    if mode == "cautious":
+        assert outcome.details["attempts"] == 2 and outcome.details["marker_dropped"] > 0
+
+
+def test_paper_adaptive_over_mavlink():
+    from preland_app.config.mission import load_mission
+
+    from .conftest import ROOT
+
+    mission = load_mission(ROOT / "missions" / "paper_marker_land.yaml")
+    served = ServedSimulator(mission, seed=2, speedup=3.0)
+    try:
+        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=mission, seed=2, land_mode="paper_adaptive"),
+                                          url=served.url))
+    finally:
+        served.stop()
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    assert outcome.landing_error_cm < 20.0 and not outcome.details["aborted_to_gps"]
 
 
 def test_lost_heartbeat_ends_the_trial_as_link_lost(thesis_mission):

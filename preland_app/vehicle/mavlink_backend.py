@@ -216,10 +216,10 @@ class MavlinkVehicle:
 
     # ---------------------------------------------------------------- sending
 
-    async def _send(self, name: str, fields: dict[str, Any]) -> None:
+    async def _send(self, name: str, fields: dict[str, Any], *, targeted: bool = True) -> None:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
-        payload = {"target_system": self.system_id, "target_component": 1, **fields}
+        payload = {"target_system": self.system_id, "target_component": 1, **fields} if targeted else dict(fields)
         await self._direct.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
                                                        target_component_id=1, fields_json=json.dumps(payload)))
 
@@ -377,7 +377,7 @@ class MavlinkVehicle:
 
     async def send_landing_target(self, target: LandingTarget) -> None:
         self._check_link("send_landing_target")
-        await self._send("LANDING_TARGET", {
+        await self._send("LANDING_TARGET", targeted=False, fields={
             "time_usec": int(target.timestamp_s * 1e6), "target_num": target.target_num,
             "frame": MAV_FRAME_BODY_FRD, "angle_x": target.angle_x_rad, "angle_y": target.angle_y_rad,
             "distance": target.distance_m or 0.0, "size_x": target.size_x_rad, "size_y": target.size_y_rad})
