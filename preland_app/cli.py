@@ -124,6 +124,9 @@ def fly(
                                              "(e.g. copter.parm), repeatable."),
     tlog: Optional[Path] = typer.Option(None, "--tlog", help="With --connect or --sitl: write a MAVLink "
                                         "telemetry log (.tlog) of the trial."),
+    fault_listen: Optional[str] = typer.Option(None, "--fault-listen", metavar="URL",
+                                               help="With --connect: take fault commands (preland fault send) "
+                                                    "on this UDP address, e.g. udp://127.0.0.1:14560."),
 ) -> None:
     """Fly a mission once (on the embedded simulator, or over MAVLink) and print its outcome."""
     from .config.mission import load_mission
@@ -165,7 +168,7 @@ def fly(
 
         try:
             outcome = run_mavlink_trial(request, url=connect, truth=not no_truth,
-                                        tlog_path=str(tlog) if tlog else None)
+                                        tlog_path=str(tlog) if tlog else None, fault_listen=fault_listen)
         except PrelandError as error:
             raise fail(f"--connect {connect}: {error}", code=EXIT_FAILED) from None
         except KeyboardInterrupt:
@@ -421,6 +424,36 @@ def sim_serve(
         raise fail(str(error)) from None
     except KeyboardInterrupt:
         typer.echo("stopped")
+
+
+fault_app = typer.Typer(help="The thesis' fault command, as a MAVLink message.", no_args_is_help=True)
+app.add_typer(fault_app, name="fault")
+
+
+@fault_app.command("send")
+def fault_send(
+    connect: str = typer.Option(..., "--connect", metavar="URL",
+                                help="Where the companion takes fault commands (its --fault-listen), "
+                                     "e.g. udp://127.0.0.1:14560."),
+    target: str = typer.Option(..., "--target", help="Sensor subsystem: irlock, marker or both."),
+    r_drop: float = typer.Option(0.0, "--r-drop", help="Drop probability (random mode; 1.0: permanent)."),
+    p_keep: int = typer.Option(0, "--p-keep", help="Values to keep (periodic mode)."),
+    p_drop: int = typer.Option(0, "--p-drop", help="Values to drop (periodic mode)."),
+) -> None:
+    """Send a PRELAND_FAULT_INJECTION command (all zero: injection off for the target)."""
+    from .mavlink.fault_message import send
+    from .sensing.faults import FaultCommand, FaultSyntaxError, FaultTarget
+
+    targets = {"irlock": FaultTarget.IRLOCK, "marker": FaultTarget.MARKER, "both": FaultTarget.BOTH}
+    if target not in targets:
+        raise fail(f"--target: expected irlock, marker or both, got {target!r}")
+    try:
+        command = FaultCommand(target=targets[target], r_drop=r_drop, p_keep=p_keep, p_drop=p_drop)
+        send(command, url=connect)
+    except (FaultSyntaxError, PrelandError) as error:
+        raise fail(str(error)) from None
+    faults = ", ".join(f"{sensor} {fault}" for sensor, fault in command.faults().items())
+    typer.echo(f"sent PRELAND_FAULT_INJECTION to {connect}: {faults}")
 
 
 @app.command("modes")

@@ -129,3 +129,16 @@ def test_mission_file_fault_errors_name_the_field(tmp_path):
     path.write_text(text)
     result = CliRunner().invoke(app, ["fly", str(path)])
     assert result.exit_code == 2 and "land.faults.marker" in result.stderr
+
+
+def test_fault_message_round_trips_in_mavlink_2_frames():
+    from preland_app.mavlink.fault_message import decode, encode
+
+    for command in (FaultCommand(target=1, r_drop=0.75), FaultCommand(target=3, p_keep=4, p_drop=2),
+                    FaultCommand(target=2)):
+        frame = encode(command)
+        assert frame[0] == 0xFD and decode(frame) == command
+    corrupt = bytearray(encode(FaultCommand(target=1, r_drop=0.5)))
+    corrupt[12] ^= 0xFF
+    assert decode(bytes(corrupt)) is None
+    assert decode(b"\xfd\x01" + b"\x00" * 20) is None

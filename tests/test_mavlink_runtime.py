@@ -128,3 +128,33 @@ def test_lost_heartbeat_ends_the_trial_as_link_lost(thesis_mission):
     # The last heartbeat came up to 1 s before the silence; the link counts as lost after 5 vehicle seconds.
     assert ended_at - silenced_at <= 5.0 + 1.0, (silenced_at, ended_at)
     assert ended_at - silenced_at >= 3.5
+
+
+def test_fault_commands_reach_the_flying_companion(thesis_mission):
+    """PRELAND_FAULT_INJECTION sent with `preland fault send` changes the marker's faults mid-landing."""
+    from typer.testing import CliRunner
+
+    from preland_app.cli import app
+
+    served = ServedSimulator(thesis_mission, seed=6, speedup=3.0)
+    fault_port = free_port()
+
+    async def main():
+        trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=thesis_mission, seed=6, land_mode="marker"),
+                                                  url=served.url, fault_listen=f"udp://127.0.0.1:{fault_port}"))
+        while served.simulator.autopilot.mode.name != "LAND":
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(1.0)
+        result = CliRunner().invoke(app, ["fault", "send", "--connect", f"udp://127.0.0.1:{fault_port}",
+                                          "--target", "marker", "--r-drop", "1.0"])
+        assert result.exit_code == 0, result.output
+        return await asyncio.wait_for(trial, timeout=120)
+
+    try:
+        outcome = asyncio.run(main())
+    finally:
+        served.stop()
+    assert outcome.outcome is Outcome.LANDED
+    event = next(e for e in outcome.events if e.kind == "fault_command")
+    assert event.data["target"] == 2 and event.data["r_drop"] == 1.0
+    assert outcome.details["marker_fault"] == "permanent" and outcome.details["marker_dropped"] > 20

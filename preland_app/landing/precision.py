@@ -90,8 +90,11 @@ class PrecisionLanding:
         return self.sensor in ("marker", "fused")
 
     def apply_fault_command(self, command: FaultCommand) -> None:
-        """The thesis' runtime fault command: change the faults of the targeted sensors."""
+        """The thesis' runtime fault command: change the faults of the targeted sensors this mode uses."""
+        used = {"irlock": self.uses_irlock, "marker": self.uses_marker}
         for sensor, spec in command.faults().items():
+            if not used[sensor]:
+                continue  # as the thesis' front-ends ignore commands for another subsystem
             if sensor in self.injectors:
                 self.injectors[sensor].set_spec(spec)
             self.faults[sensor] = spec

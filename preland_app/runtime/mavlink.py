@@ -16,6 +16,8 @@ from ..errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, Wai
 from ..events import EventLog
 from ..geo import GeoPoint, LocalTangentPlane
 from ..landing.base import ScoringReference
+from ..mavlink.fault_message import listen
+from ..sensing.faults import FaultCommand
 from ..mission import MissionRunner
 from ..outcome import Outcome, TrialOutcome, score_touchdown
 from ..sensing.virtual_camera import CameraPose
@@ -55,9 +57,10 @@ class SimStateTruth:
 
 
 async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, link_timeout_s: float = 5.0,
-                      tlog_path: str | None = None) -> TrialOutcome:
+                      tlog_path: str | None = None, fault_listen: str | None = None) -> TrialOutcome:
     """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time).
-    `tlog_path`: write every MAVLink message received to this telemetry log."""
+    `tlog_path`: write every MAVLink message received to this telemetry log. `fault_listen`: a UDP address
+    where PRELAND_FAULT_INJECTION commands change the land mode's faults while it flies."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
     vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path)
@@ -77,6 +80,19 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
                            takeoff_altitude_rel_m=request.takeoff_altitude_rel_m)
     recorder = TrajectoryRecorder(vehicle=vehicle, clock=clock, truth=truth_source.ned if truth_source else None)
     recording = asyncio.ensure_future(recorder.run())
+    listener = None
+    if fault_listen is not None:
+        def on_fault_command(fault_command: FaultCommand) -> None:
+            apply = getattr(strategy, "apply_fault_command", None)
+            if apply is None:
+                events.add("fault_command", f"ignored: land mode {strategy.name!r} takes no faults")
+                return
+            apply(fault_command)
+            events.add("fault_command", f"faults now {', '.join(f'{k} {v}' for k, v in fault_command.faults().items())}",
+                       target=int(fault_command.target), r_drop=fault_command.r_drop, p_keep=fault_command.p_keep,
+                       p_drop=fault_command.p_drop)
+
+        listener = await listen(fault_listen, on_fault_command)
     outcome, message = Outcome.LANDED, Outcome.LANDED.description
     try:
         await runner.run()
@@ -95,6 +111,8 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     finally:
         recording.cancel()
         await asyncio.gather(recording, return_exceptions=True)
+        if listener is not None:
+            listener.close()
         await vehicle.close()
     trajectory = recorder.array()
     score = touchdown = None
@@ -133,8 +151,8 @@ def _no_truth() -> CameraPose:
     raise PrelandError("this runtime has no ground truth: simulated sensors cannot be used (use a real camera)")
 
 
-def run_mavlink_trial(request: TrialRequest, *, url: str, truth: bool = True,
-                      tlog_path: str | None = None) -> TrialOutcome:
-    return asyncio.run(fly_mavlink(request, url=url, truth=truth, tlog_path=tlog_path))
+def run_mavlink_trial(request: TrialRequest, *, url: str, truth: bool = True, tlog_path: str | None = None,
+                      fault_listen: str | None = None) -> TrialOutcome:
+    return asyncio.run(fly_mavlink(request, url=url, truth=truth, tlog_path=tlog_path, fault_listen=fault_listen))
 
 
