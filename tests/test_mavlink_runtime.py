@@ -92,16 +92,16 @@ def test_camera_land_modes_over_mavlink(thesis_mission, mode, faults):
         assert outcome.details["attempts"] == 2 and outcome.details["marker_dropped"] > 0
 
 
-def test_paper_adaptive_over_mavlink():
+@pytest.mark.parametrize("mode", ["paper_adaptive", "paper_static"])
+def test_paper_algorithms_over_mavlink(mode):
     from preland_app.config.mission import load_mission
 
     from .conftest import ROOT
 
     mission = load_mission(ROOT / "missions" / "paper_marker_land.yaml")
-    served = ServedSimulator(mission, seed=2, speedup=3.0)
+    served = ServedSimulator(mission, seed=2, speedup=4.0)
     try:
-        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=mission, seed=2, land_mode="paper_adaptive"),
-                                          url=served.url))
+        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=mission, seed=2, land_mode=mode), url=served.url))
     finally:
         served.stop()
     assert outcome.outcome is Outcome.LANDED, outcome.message

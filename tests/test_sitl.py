@@ -67,6 +67,17 @@ def test_a_trial_on_sitl_launches_a_fresh_instance_and_stops_it(fake_sitl, thesi
     assert outcome.details["tlog_messages"] > 500
 
 
+def test_fly_on_sitl_from_the_cli(fake_sitl):
+    import json as json_module
+
+    script, _ = fake_sitl
+    result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--sitl", str(script), "--sitl-speedup", "8",
+                                      "--seed", "3", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json_module.loads(result.stdout.strip().splitlines()[-1])
+    assert data["outcome"] == "landed" and data["details"]["runtime"] == "sitl"
+
+
 def test_a_missing_binary_gives_one_line(tmp_path, monkeypatch):
     monkeypatch.delenv(SITL_ENV, raising=False)
     result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--sitl", str(tmp_path / "nope")])

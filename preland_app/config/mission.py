@@ -147,7 +147,7 @@ class TimeoutsSpec:
     """Per-step timeouts in vehicle seconds."""
 
     position_fix_s: float = 120.0
-    arm_s: float = 20.0
+    arm_s: float = 60.0  # ArduPilot refuses arming until its EKF is ready (about 40 s after boot in SITL)
     takeoff_s: float = 60.0
     waypoint_s: float = 60.0
     land_s: float = 240.0
