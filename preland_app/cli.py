@@ -456,6 +456,112 @@ def fault_send(
     typer.echo(f"sent PRELAND_FAULT_INJECTION to {connect}: {faults}")
 
 
+@app.command("detect")
+def detect(
+    camera_source: Optional[str] = typer.Option(None, "--camera", metavar="SRC",
+                                                help="Capture device: index (0), device path, or GStreamer pipeline."),
+    video: Optional[Path] = typer.Option(None, "--video", help="A video file instead of a camera."),
+    pad_name: str = typer.Option("thesis", "--pad", help="Pad preset (thesis, paper) or pad YAML file."),
+    calibration: Optional[Path] = typer.Option(None, "--calibration", help="OpenCV calibration file."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Write the annotated frames to this video."),
+    frames: int = typer.Option(0, "--frames", help="Stop after this many frames (0: the whole video, or Ctrl-C)."),
+) -> None:
+    """Detect the pad's markers live or in a video: overlays, detection rate and per-frame latency."""
+    import asyncio
+    import statistics
+    import time
+
+    from .clock import LoopClock
+    from .sensing.camera import RPI_CAMERA_V2_640X480, load_calibration
+    from .sensing.capture import CaptureDeviceSource, VideoFileSource, VideoRecorder
+    from .sensing.marker import MarkerDetector
+    from .sensing.overlay import draw_detections
+    from .sensing.pad import load_pad
+
+    if (camera_source is None) == (video is None):
+        raise fail("give exactly one of --camera or --video")
+    try:
+        pad = load_pad(pad_name)
+        camera = load_calibration(calibration) if calibration else RPI_CAMERA_V2_640X480
+    except PrelandError as error:
+        raise fail(str(error)) from None
+    detector = MarkerDetector(pad=pad, camera=camera)
+
+    async def main() -> tuple[int, int, list[float]]:
+        clock = LoopClock()
+        source = (VideoFileSource(path=video, clock=clock, camera=camera) if video is not None
+                  else CaptureDeviceSource(source=camera_source, clock=clock, camera=camera))
+        recorder = None
+        seen = total = 0
+        latencies: list[float] = []
+        try:
+            while frames <= 0 or total < frames:
+                frame = await source.next_frame()
+                if frame is None:
+                    break
+                started = time.perf_counter()
+                detections = detector.detect(frame.image)
+                latencies.append(time.perf_counter() - started)
+                total += 1
+                seen += bool(detections)
+                if out is not None:
+                    annotated = draw_detections(frame.image, detections, camera)
+                    if recorder is None:
+                        recorder = VideoRecorder(path=out, frame_rate_hz=camera.frame_rate_hz,
+                                                 size=(annotated.shape[1], annotated.shape[0]), color=True)
+                    recorder.write(annotated)
+        finally:
+            if recorder is not None:
+                recorder.close()
+        return seen, total, latencies
+
+    try:
+        seen, total, latencies = asyncio.run(main())
+    except PrelandError as error:
+        raise fail(str(error)) from None
+    except KeyboardInterrupt:
+        raise fail("interrupted", code=130) from None
+    if total == 0:
+        raise fail("no frames")
+    latencies_ms = sorted(1000 * v for v in latencies)
+    typer.echo(f"frames {total}, pad detected in {seen} ({100 * seen / total:.1f} %)")
+    typer.echo(f"detection latency per frame: median {statistics.median(latencies_ms):.2f} ms, "
+               f"p95 {latencies_ms[int(0.95 * (len(latencies_ms) - 1))]:.2f} ms")
+    if out is not None:
+        typer.echo(f"wrote {out}")
+
+
+camera_app = typer.Typer(help="Cameras: calibration.", no_args_is_help=True)
+app.add_typer(camera_app, name="camera")
+
+
+@camera_app.command("calibrate")
+def camera_calibrate(
+    images: Optional[Path] = typer.Option(None, "--images", help="Folder of ChArUco board images (png, jpg)."),
+    video: Optional[Path] = typer.Option(None, "--video", help="A video of the board (every 10th frame is used)."),
+    out: Path = typer.Option(..., "--out", help="OpenCV calibration file to write (.yaml)."),
+    squares_x: int = typer.Option(7, "--squares-x", help="Board squares across."),
+    squares_y: int = typer.Option(5, "--squares-y", help="Board squares down."),
+    square_m: float = typer.Option(0.04, "--square-m", help="Square side in m."),
+    marker_m: float = typer.Option(0.03, "--marker-m", help="Marker side in m."),
+    dictionary: str = typer.Option("DICT_4X4_50", "--dictionary", help="ArUco dictionary of the board."),
+) -> None:
+    """Calibrate a camera from views of a ChArUco board; writes a file the marker sensor reads."""
+    from .sensing.calibration import CharucoBoardSpec, calibrate, read_images
+
+    if images is None and video is None:
+        raise fail("give --images or --video")
+    try:
+        result = calibrate(read_images(folder=images, video=video),
+                           board_spec=CharucoBoardSpec(squares_x=squares_x, squares_y=squares_y, square_m=square_m,
+                                                       marker_m=marker_m, dictionary=dictionary))
+    except (PrelandError, KeyError) as error:
+        raise fail(str(error)) from None
+    result.write(out)
+    typer.echo(f"wrote {out}: fx {result.fx_px:.1f} px, fy {result.fy_px:.1f} px, "
+               f"{result.views_used} views, RMS reprojection error {result.rms_error_px:.3f} px")
+
+
 @app.command("modes")
 def modes() -> None:
     """List the land modes this version can fly."""
