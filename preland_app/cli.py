@@ -562,6 +562,55 @@ def camera_calibrate(
                f"{result.views_used} views, RMS reprojection error {result.rms_error_px:.3f} px")
 
 
+trial_app = typer.Typer(help="Trials measured in the field.", no_args_is_help=True)
+app.add_typer(trial_app, name="trial")
+
+
+@trial_app.command("record")
+def trial_record(
+    db: Path = typer.Option(..., "--db", help="SQLite results database (created if missing)."),
+    campaign: str = typer.Option(..., "--campaign", help="Campaign the trial belongs to."),
+    scenario: str = typer.Option(..., "--scenario", help="Scenario label (as in the campaign file)."),
+    error_cm: float = typer.Option(..., "--error-cm", help="Tape-measured landing error in cm."),
+    x_cm: Optional[float] = typer.Option(None, "--x-cm", help="Offset north (x) in cm."),
+    y_cm: Optional[float] = typer.Option(None, "--y-cm", help="Offset east (y) in cm."),
+    landing_time_s: Optional[float] = typer.Option(None, "--landing-time-s", help="Landing time in s."),
+    outcome: str = typer.Option("landed", "--outcome", help="landed, aborted, crashed..."),
+    land_mode: Optional[str] = typer.Option(None, "--land", help="Land mode flown."),
+    takeoff_altitude_m: Optional[float] = typer.Option(None, "--takeoff-altitude-m", help="Initial height in m."),
+    note: str = typer.Option("", "--note", help="Free text."),
+) -> None:
+    """Store a field trial's measured outcome beside the simulated trials of the same scenario."""
+    from .campaign.store import TrialRecord
+    from .outcome import Outcome
+
+    if error_cm < 0:
+        raise fail(f"--error-cm: must be >= 0, got {error_cm:g}")
+    if outcome not in {o.value for o in Outcome}:
+        raise fail(f"--outcome: unknown outcome {outcome!r} (expected one of: "
+                   f"{', '.join(o.value for o in Outcome)})")
+    if land_mode is not None and land_mode not in land_mode_names():
+        raise fail(f"--land: unknown land mode {land_mode!r}")
+    store = _open_store(db, must_exist=False)
+    try:
+        known = next((t for t in store.trials(campaign) if t["scenario"] == scenario), None)
+        index = store.next_trial_index(campaign, scenario, "field")
+        result = {"outcome": outcome, "message": note or "measured in the field",
+                  "land_mode": land_mode or (known["land_mode"] if known else None),
+                  "sensor": known["sensor"] if known else None, "faults": known["faults"] if known else None,
+                  "takeoff_altitude_m": takeoff_altitude_m if takeoff_altitude_m is not None
+                  else (known["takeoff_altitude_m"] if known else None),
+                  "scoring_reference": known["scoring_reference"] if known else "pad",
+                  "landing_error_cm": error_cm, "offset_north_cm": x_cm, "offset_east_cm": y_cm,
+                  "landing_time_s": landing_time_s, "details": {"note": note} if note else {}}
+        store.add_trial(TrialRecord(campaign=campaign, scenario=scenario,
+                                    scenario_index=store.scenario_index(campaign, scenario), trial_index=index,
+                                    seed=0, result=result, spec_hash="field", runtime="field", source="field"))
+    finally:
+        store.close()
+    typer.echo(f"recorded field trial {index} of {campaign} / {scenario}: {error_cm:g} cm")
+
+
 @app.command("modes")
 def modes() -> None:
     """List the land modes this version can fly."""

@@ -232,3 +232,28 @@ def test_report_and_export(tmp_path):
 def test_shipped_campaign_files_load(name):
     campaign = load_campaign(ROOT / "campaigns" / f"{name}.yaml")
     assert campaign.name == name and campaign.scenarios
+
+
+def test_field_trials_sit_beside_simulated_ones_in_the_report(tmp_path):
+    campaign = load_campaign(write_campaign(tmp_path, QUICK))
+    db = tmp_path / "r.db"
+    with ResultsStore(db) as store:
+        run_campaign(campaign, store, workers=1)
+    runner = CliRunner()
+    for error, x, y in ((12.5, 10.0, -7.5), (30.0, -20.0, 22.4)):
+        result = runner.invoke(app, ["trial", "record", "--db", str(db), "--campaign", "quick", "--scenario", "gps",
+                                     "--error-cm", str(error), "--x-cm", str(x), "--y-cm", str(y)])
+        assert result.exit_code == 0, result.output
+    with ResultsStore(db) as store:
+        summaries = summarize(store, "quick")
+        assert [s.label for s in summaries] == ["gps", "gps [field]", "irlock"]
+        field = summaries[1]
+        assert field.avg_error_cm() == pytest.approx(21.25) and field.land_mode == "normal"
+        assert all(t["source"] == "field" and t["runtime"] == "field" for t in field.trials)
+        # Resuming the simulated campaign is not confused by the field trials.
+        assert run_campaign(campaign, store, workers=1, resume=True) == (0, 6)
+    result = runner.invoke(app, ["campaign", "report", str(db), "--out", str(tmp_path / "rep")])
+    assert result.exit_code == 0 and "| gps [field] |" in result.stdout
+    result = runner.invoke(app, ["trial", "record", "--db", str(db), "--campaign", "quick", "--scenario", "gps",
+                                 "--error-cm", "-1"])
+    assert result.exit_code == 2 and "--error-cm" in result.stderr

@@ -140,11 +140,12 @@ def run_campaign(campaign: CampaignSpec, store: ResultsStore, *, workers: int | 
     Returns (trials run now, trials in the campaign)."""
     scenarios = resolve_scenarios(campaign)
     jobs = plan_trials(campaign, scenarios, sitl=sitl)
-    done = store.done_keys(campaign.name)
+    source = "sitl" if sitl is not None else "sim"
+    done = store.done_keys(campaign.name, source)
     if done and not resume:
         raise StoreError(f"campaign {campaign.name!r} already has {len(done)} trial(s) in {store.path}; "
                          "add --resume to finish it, or use another --db")
-    stored_hashes = store.trial_hashes(campaign.name)
+    stored_hashes = store.trial_hashes(campaign.name, source)
     for scenario in scenarios:
         hashes = stored_hashes.get(scenario.spec.label, set())
         if hashes and hashes != {scenario.spec_hash}:

@@ -117,19 +117,22 @@ def summarize(store: ResultsStore, campaign: str) -> list[ScenarioSummary]:
         raise ReportError(f"{store.path}: no trials for campaign {campaign!r} "
                           f"(campaigns here: {', '.join(store.campaigns()) or 'none'})")
     references, base = _references(store, campaign)
-    summaries: dict[str, ScenarioSummary] = {}
+    summaries: dict[tuple[str, str], ScenarioSummary] = {}
     for trial in trials:
-        summary = summaries.get(trial["scenario"])
+        key = (trial["scenario"], trial["source"])
+        summary = summaries.get(key)
         if summary is None:
             reference = references.get(trial["scenario"])
+            label = trial["scenario"] if trial["source"] == "sim" else f"{trial['scenario']} [{trial['source']}]"
             summary = ScenarioSummary(
-                label=trial["scenario"], index=trial["scenario_index"], land_mode=trial["land_mode"] or "",
+                label=label, index=trial["scenario_index"], land_mode=trial["land_mode"] or "",
                 sensor=trial["sensor"] or "none", failures=trial["faults"] or "none",
                 initial_height_m=trial["takeoff_altitude_m"], trials=[], reference=reference,
                 published=_published_trials(reference, base) if reference else [])
-            summaries[trial["scenario"]] = summary
+            summaries[key] = summary
         summary.trials.append(trial)
-    return sorted(summaries.values(), key=lambda s: s.index)
+    order = {"sim": 0, "sitl": 1, "field": 2}
+    return sorted(summaries.values(), key=lambda s: (s.index, order.get(s.trials[0]["source"], 3)))
 
 
 def _fmt(value: float | None, digits: int = 1) -> str:

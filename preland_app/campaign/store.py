@@ -6,8 +6,9 @@ Tables:
 * `trials`: one row per trial: campaign, scenario (label and index), trial
   index, seed, every outcome field, the scenario's spec hash, the software
   version, the runtime (embedded, sitl, field), the source (sim, sitl, field),
-  the wall time it took; unique per (campaign, scenario, trial index), so a
-  resumed campaign can never record a trial twice;
+  the wall time it took; unique per (campaign, scenario, trial index, source),
+  so a resumed campaign can never record a trial twice, and field trials
+  recorded by hand sit beside simulated ones of the same scenario;
 * `events`: the mission's event log per trial;
 * `trajectories`: the trial's downsampled trajectory (JSON rows, see
   `outcome.TRAJECTORY_COLUMNS`).
@@ -65,7 +66,7 @@ CREATE TABLE IF NOT EXISTS trials (
     source TEXT NOT NULL DEFAULT 'sim',
     wall_time_s REAL,
     finished_at TEXT NOT NULL DEFAULT (datetime('now')),
-    UNIQUE (campaign, scenario, trial_index)
+    UNIQUE (campaign, scenario, trial_index, source)
 );
 CREATE TABLE IF NOT EXISTS events (
     trial_id INTEGER NOT NULL REFERENCES trials(id) ON DELETE CASCADE,
@@ -186,14 +187,28 @@ class ResultsStore:
                            (trial_id, json.dumps(record.trajectory_columns), json.dumps(record.trajectory_rows)))
         return trial_id
 
-    def done_keys(self, campaign: str) -> set[tuple[str, int]]:
-        """(scenario, trial_index) of every stored trial of a campaign."""
+    def done_keys(self, campaign: str, source: str = "sim") -> set[tuple[str, int]]:
+        """(scenario, trial_index) of every stored trial of a campaign from one source."""
         return {(row["scenario"], row["trial_index"]) for row in self.db.execute(
-            "SELECT scenario, trial_index FROM trials WHERE campaign = ?", (campaign,))}
+            "SELECT scenario, trial_index FROM trials WHERE campaign = ? AND source = ?", (campaign, source))}
 
-    def trial_hashes(self, campaign: str) -> dict[str, set[str]]:
+    def next_trial_index(self, campaign: str, scenario: str, source: str) -> int:
+        row = self.db.execute("SELECT MAX(trial_index) AS m FROM trials WHERE campaign = ? AND scenario = ? "
+                              "AND source = ?", (campaign, scenario, source)).fetchone()
+        return 0 if row["m"] is None else int(row["m"]) + 1
+
+    def scenario_index(self, campaign: str, scenario: str) -> int:
+        row = self.db.execute("SELECT MIN(scenario_index) AS i FROM trials WHERE campaign = ? AND scenario = ?",
+                              (campaign, scenario)).fetchone()
+        if row["i"] is not None:
+            return int(row["i"])
+        row = self.db.execute("SELECT MAX(scenario_index) AS m FROM trials WHERE campaign = ?", (campaign,)).fetchone()
+        return 0 if row["m"] is None else int(row["m"]) + 1
+
+    def trial_hashes(self, campaign: str, source: str = "sim") -> dict[str, set[str]]:
         hashes: dict[str, set[str]] = {}
-        for row in self.db.execute("SELECT scenario, spec_hash FROM trials WHERE campaign = ?", (campaign,)):
+        for row in self.db.execute("SELECT scenario, spec_hash FROM trials WHERE campaign = ? AND source = ?",
+                                   (campaign, source)):
             hashes.setdefault(row["scenario"], set()).add(row["spec_hash"])
         return hashes
 
@@ -204,7 +219,7 @@ class ResultsStore:
             query += " WHERE campaign = ?"
             args = (campaign,)
         rows = []
-        for row in self.db.execute(query + " ORDER BY campaign, scenario_index, trial_index", args):
+        for row in self.db.execute(query + " ORDER BY campaign, scenario_index, source DESC, trial_index", args):
             data = dict(row)
             data["details"] = json.loads(data["details"] or "{}")
             rows.append(data)
