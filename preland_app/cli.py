@@ -124,6 +124,10 @@ def fly(
                                              "(e.g. copter.parm), repeatable."),
     tlog: Optional[Path] = typer.Option(None, "--tlog", help="With --connect or --sitl: write a MAVLink "
                                         "telemetry log (.tlog) of the trial."),
+    camera_source: Optional[str] = typer.Option(None, "--camera", metavar="SRC",
+                                                help="With --connect: a real camera (index, device, GStreamer "
+                                                     "pipeline) or a video file instead of the virtual camera."),
+    no_preflight: bool = typer.Option(False, "--no-preflight", help="With --connect: skip the preflight checks."),
     fault_listen: Optional[str] = typer.Option(None, "--fault-listen", metavar="URL",
                                                help="With --connect: take fault commands (preland fault send) "
                                                     "on this UDP address, e.g. udp://127.0.0.1:14560."),
@@ -168,7 +172,8 @@ def fly(
 
         try:
             outcome = run_mavlink_trial(request, url=connect, truth=not no_truth,
-                                        tlog_path=str(tlog) if tlog else None, fault_listen=fault_listen)
+                                        tlog_path=str(tlog) if tlog else None, fault_listen=fault_listen,
+                                        preflight=not no_preflight, camera_source=camera_source)
         except PrelandError as error:
             raise fail(f"--connect {connect}: {error}", code=EXIT_FAILED) from None
         except KeyboardInterrupt:
@@ -176,6 +181,11 @@ def fly(
     else:
         outcome = run_trial(request)
     data = outcome.to_dict(include_events=events)
+    failures = outcome.details.get("preflight_failures") or []
+    if failures:
+        for line in failures:
+            typer.echo(f"preland: preflight: {line}", err=True)
+        raise typer.Exit(EXIT_FAILED)
     if as_json:
         typer.echo(json.dumps(data, sort_keys=True))
     else:

@@ -11,6 +11,7 @@ reached; the caller turns it into a trial outcome.
 from __future__ import annotations
 
 import asyncio
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +19,7 @@ import numpy as np
 from .clock import wait_until
 from .config.mission import MissionSpec
 from .errors import CommandDenied, MissionAborted
+from .field.takeover import GuardedVehicle, PilotTakeover
 from .events import EventLog
 from .landing.base import LandingContext, LandingReport, LandStrategy
 from .sensing.suite import SensorSuite
@@ -25,6 +27,10 @@ from .vehicle.protocol import Vehicle
 from .vehicle.types import FlightMode, PositionNed, Telemetry
 
 POLL_PERIOD_S = 0.1
+
+
+class GeofenceBreach(MissionAborted):
+    """The vehicle left the geofence; the fence's action (LAND or RTL) has been commanded."""
 TAKEOFF_REACHED_FRACTION = 0.95  # as DroneKit's example scripts (the thesis' tool) judge a take-off done
 
 
@@ -55,7 +61,9 @@ class MissionRunner:
         takeoff_altitude_rel_m: float | None = None,
     ) -> None:
         self.spec = spec
-        self.vehicle = vehicle
+        # Every command goes through the guard, so a pilot's mode change stops them all at once.
+        self.guard = GuardedVehicle(vehicle)
+        self.vehicle = self.guard
         self.clock = vehicle.clock
         self.strategy = strategy
         self.events = events
@@ -95,13 +103,29 @@ class MissionRunner:
                 f"altitude {t.altitude_rel_m:.2f} m")
 
     async def _watch(self) -> None:
-        """Stop the mission if the vehicle disarms while it should be flying."""
+        """Stop the mission if the vehicle disarms while it should be flying, if the pilot takes over,
+        or if it leaves the geofence."""
+        fence = self.spec.geofence
         while True:
             await self.clock.sleep(POLL_PERIOD_S)
             t = await self._telemetry()
+            try:
+                self.guard.check(t)
+            except PilotTakeover as error:
+                self.events.add("pilot_takeover", str(error), mode=t.mode.name)
+                raise
             if self._airborne and not self._landing and not t.armed:
                 self.events.add("aborted", "vehicle disarmed in flight")
                 raise MissionAborted("vehicle disarmed in flight before landing")
+            if fence is not None and t.armed:
+                p = t.position_ned_m
+                distance_m = math.hypot(p.north_m, p.east_m)
+                if distance_m > fence.max_distance_m or -p.down_m > fence.max_height_m:
+                    await self.guard.set_mode(FlightMode[fence.action])
+                    message = (f"geofence: {distance_m:.1f} m from home at {-p.down_m:.1f} m "
+                               f"(limits {fence.max_distance_m:g} m, {fence.max_height_m:g} m): {fence.action}")
+                    self.events.add("geofence", message, action=fence.action)
+                    raise GeofenceBreach(message)
 
     async def _steps(self) -> MissionReport:
         spec, vehicle, clock, timeouts = self.spec, self.vehicle, self.clock, self.spec.timeouts

@@ -24,6 +24,7 @@ class Outcome(enum.Enum):
     TIMED_OUT = "timed_out"
     CRASHED = "crashed"
     LINK_LOST = "link_lost"
+    PILOT_TAKEOVER = "pilot_takeover"
     ERROR = "error"
 
     @property
@@ -34,6 +35,7 @@ class Outcome(enum.Enum):
             Outcome.TIMED_OUT: "a step did not finish within its timeout",
             Outcome.CRASHED: "the vehicle hit the ground too hard or tilted over",
             Outcome.LINK_LOST: "the link to the vehicle was lost",
+            Outcome.PILOT_TAKEOVER: "the pilot took over (a mode change preland did not make)",
             Outcome.ERROR: "the trial failed with an error",
         }[self]
 

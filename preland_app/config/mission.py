@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..errors import SpecError, SpecValueError, require
+from ..field.preflight import PreflightSpec
 from ..landing.base import LandStrategy
 from ..landing.cautious import CautiousSpec
 from ..landing.paper import PaperSpec
@@ -158,6 +159,21 @@ class TimeoutsSpec:
 
 
 @dataclass(frozen=True)
+class GeofenceSpec:
+    """A cylinder around home: leaving it (`max_distance_m` horizontally or `max_height_m` up) switches the
+    vehicle to `action` (LAND or RTL) and ends the mission."""
+
+    max_distance_m: float = 50.0
+    max_height_m: float = 30.0
+    action: str = "RTL"
+
+    def __post_init__(self) -> None:
+        require(self.max_distance_m > 0, "max_distance_m", "must be > 0 m")
+        require(self.max_height_m > 0, "max_height_m", "must be > 0 m")
+        require(self.action in ("LAND", "RTL"), "action", "must be LAND or RTL")
+
+
+@dataclass(frozen=True)
 class MissionSpec:
     """A whole mission. `params` are autopilot parameters (ArduPilot names and units) set before arming."""
 
@@ -170,6 +186,8 @@ class MissionSpec:
     timeouts: TimeoutsSpec = field(default_factory=TimeoutsSpec)
     environment: EnvironmentSpec = field(default_factory=EnvironmentSpec)
     sensors: SensorsSpec = field(default_factory=SensorsSpec)
+    geofence: GeofenceSpec | None = None
+    preflight: PreflightSpec = field(default_factory=PreflightSpec)
     params: dict[str, float] = field(default_factory=dict)
     initial_yaw_deg: float = 0.0
     source_path: str = field(default="", compare=False)

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from ..clock import LoopClock, run_virtual
 from ..config.mission import MissionSpec
+from ..field.takeover import PilotTakeover
 from ..errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
 from ..events import EventLog
 from ..landing.base import ScoringReference
@@ -86,6 +87,8 @@ async def fly_embedded(request: TrialRequest) -> TrialOutcome:
         outcome, message = Outcome.CRASHED, str(error)
     except LinkLost as error:
         outcome, message = Outcome.LINK_LOST, str(error)
+    except PilotTakeover as error:
+        outcome, message = Outcome.PILOT_TAKEOVER, str(error)
     except PrelandError as error:
         outcome, message = Outcome.ERROR, f"{type(error).__name__}: {error}"
     except Exception as error:  # a bug must still end as this trial's outcome, not kill a campaign

@@ -12,10 +12,14 @@ from __future__ import annotations
 
 import asyncio
 
+from ..field.takeover import PilotTakeover
 from ..errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
 from ..events import EventLog
 from ..geo import GeoPoint, LocalTangentPlane
+from ..field.preflight import PreflightFailed, run_preflight
 from ..landing.base import ScoringReference
+from ..landing.precision import PrecisionLanding
+from ..sensing.marker import TrackingMarkerDetector
 from ..mavlink.fault_message import listen
 from ..sensing.faults import FaultCommand
 from ..mission import MissionRunner
@@ -57,10 +61,13 @@ class SimStateTruth:
 
 
 async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, link_timeout_s: float = 5.0,
-                      tlog_path: str | None = None, fault_listen: str | None = None) -> TrialOutcome:
+                      tlog_path: str | None = None, fault_listen: str | None = None, preflight: bool = False,
+                      camera_source: str | None = None, frame_source=None) -> TrialOutcome:
     """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time).
     `tlog_path`: write every MAVLink message received to this telemetry log. `fault_listen`: a UDP address
-    where PRELAND_FAULT_INJECTION commands change the land mode's faults while it flies."""
+    where PRELAND_FAULT_INJECTION commands change the land mode's faults while it flies. `preflight`: run
+    the preflight checks first and refuse take-off when one fails. `camera_source` (a capture device or a
+    video file) or `frame_source` (any FrameSource) replaces the virtual camera."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
     vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path)
@@ -72,9 +79,25 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         await vehicle.wait_for_truth()
         truth_source = SimStateTruth(vehicle)
         truth_source.start()
+    real_camera = frame_source or (_open_camera(camera_source, mission, clock) if camera_source else None)
     sensors = build_sensor_suite(mission=mission, seed=request.seed,
                                  true_pose=truth_source.pose if truth_source else _no_truth, clock=clock,
-                                 camera=strategy.uses_marker, irlock=strategy.uses_irlock)
+                                 camera=strategy.uses_marker and real_camera is None, irlock=strategy.uses_irlock)
+    if real_camera is not None:
+        sensors.camera = real_camera
+        sensors.marker_detector = TrackingMarkerDetector(pad=mission.pad_spec(), camera=real_camera.camera)
+    if preflight:
+        try:
+            passed = await run_preflight(vehicle=vehicle, clock=clock, spec=mission.preflight,
+                                         precision=isinstance(strategy, PrecisionLanding), sensors=sensors)
+        except PreflightFailed as error:
+            await vehicle.close()
+            return TrialOutcome(outcome=Outcome.ABORTED, message=str(error), seed=request.seed, mission=mission.name,
+                                land_mode=mission.land.mode, takeoff_altitude_rel_m=mission.takeoff_altitude_rel_m(),
+                                scoring_reference=strategy.scoring_reference.value,
+                                details={"preflight_failures": error.failures, "runtime": "mavlink"})
+        for line in passed:
+            events.add("preflight", line)
     runner = MissionRunner(spec=mission, vehicle=vehicle, strategy=strategy, events=events,
                            rng=child_rng(request.seed, "landing"), sensors=sensors,
                            takeoff_altitude_rel_m=request.takeoff_altitude_rel_m)
@@ -100,6 +123,8 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         outcome, message = Outcome.TIMED_OUT, str(error)
     except LinkLost as error:
         outcome, message = Outcome.LINK_LOST, str(error)
+    except PilotTakeover as error:
+        outcome, message = Outcome.PILOT_TAKEOVER, str(error)
     except MissionAborted as error:
         outcome, message = Outcome.ABORTED, str(error)
     except VehicleCrashed as error:
@@ -147,12 +172,25 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         trajectory=trajectory)
 
 
+def _open_camera(source: str, mission, clock):
+    from pathlib import Path
+
+    from ..sensing.capture import CaptureDeviceSource, VideoFileSource
+
+    camera = mission.sensors.camera.model(relative_to=mission.base_dir)
+    if Path(source).is_file():
+        return VideoFileSource(path=source, clock=clock, camera=camera, realtime=True)
+    return CaptureDeviceSource(source=source, clock=clock, camera=camera)
+
+
 def _no_truth() -> CameraPose:
     raise PrelandError("this runtime has no ground truth: simulated sensors cannot be used (use a real camera)")
 
 
 def run_mavlink_trial(request: TrialRequest, *, url: str, truth: bool = True, tlog_path: str | None = None,
-                      fault_listen: str | None = None) -> TrialOutcome:
-    return asyncio.run(fly_mavlink(request, url=url, truth=truth, tlog_path=tlog_path, fault_listen=fault_listen))
+                      fault_listen: str | None = None, preflight: bool = False,
+                      camera_source: str | None = None) -> TrialOutcome:
+    return asyncio.run(fly_mavlink(request, url=url, truth=truth, tlog_path=tlog_path, fault_listen=fault_listen,
+                                   preflight=preflight, camera_source=camera_source))
 
 

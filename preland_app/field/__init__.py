@@ -1,0 +1,1 @@
+"""Field trials: preflight checks, pilot takeover, geofence."""

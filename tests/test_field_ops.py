@@ -1,0 +1,156 @@
+"""Field operations: preflight checks, pilot takeover and the geofence."""
+
+import asyncio
+from dataclasses import replace
+
+import numpy as np
+
+from preland_app.config.mission import GeofenceSpec
+from preland_app.field.preflight import PreflightSpec
+from preland_app.outcome import Outcome
+from preland_app.runtime.embedded import TrialRequest, run_trial
+from preland_app.runtime.mavlink import fly_mavlink
+from preland_app.sensing.camera import RPI_CAMERA_V2_640X480, Frame
+from preland_app.sim.spec import NavigationSpec
+from preland_app.vehicle.types import FlightMode
+
+from .test_mavlink_runtime import ServedSimulator
+
+
+class BlankCamera:
+    """A camera that sees no pad, at `rate_hz` frames per vehicle second."""
+
+    camera = RPI_CAMERA_V2_640X480
+
+    def __init__(self, clock_getter, rate_hz: float) -> None:
+        self._clock_getter = clock_getter
+        self.rate_hz = rate_hz
+
+    async def next_frame(self):
+        clock = self._clock_getter()
+        await clock.sleep(1.0 / self.rate_hz)
+        return Frame(np.full((480, 640), 120, np.uint8), capture_time_s=clock.now_s())
+
+
+def _preflight(mission, *, seed=1, mode="normal", prepare=None, frame_source=None):
+    served = ServedSimulator(mission, seed=seed, speedup=4.0)
+    if prepare is not None:
+        prepare(served.simulator)
+    try:
+        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=mission, seed=seed, land_mode=mode), url=served.url,
+                                          preflight=True, frame_source=frame_source))
+        armed = served.simulator.autopilot.armed
+    finally:
+        served.stop()
+    return outcome, armed
+
+
+def test_no_gps_fix_refuses_take_off(thesis_mission):
+    environment = replace(thesis_mission.environment,
+                          navigation=NavigationSpec(gps_fix_delay_s=1e6))
+    outcome, armed = _preflight(replace(thesis_mission, environment=environment))
+    assert outcome.outcome is Outcome.ABORTED and not armed
+    assert outcome.details["preflight_failures"] == ["GPS: no 3D fix / position estimate not healthy yet"]
+
+
+def test_low_battery_refuses_take_off(thesis_mission):
+    def drain(simulator):
+        simulator.battery_used_mah = 0.8 * simulator.environment.airframe.battery_capacity_mah
+
+    outcome, armed = _preflight(thesis_mission, prepare=drain)
+    assert not armed
+    (failure,) = [f for f in outcome.details["preflight_failures"] if f.startswith("battery")]
+    assert failure.endswith("% is below 30 %") and 15 <= int(failure.split()[1]) <= 20
+
+
+def test_precision_mode_without_plnd_refuses_take_off(thesis_mission):
+    outcome, armed = _preflight(thesis_mission, mode="irlock")
+    assert not armed
+    failures = outcome.details["preflight_failures"]
+    assert any(f.startswith("PLND_ENABLED is 0") for f in failures)
+    assert any(f.startswith("PLND_TYPE is 0") and "reboot" in f for f in failures)
+
+
+def test_slow_camera_and_missing_pad_refuse_take_off(thesis_mission):
+    mission = replace(thesis_mission, params={"PLND_ENABLED": 1, "PLND_TYPE": 1},
+                      preflight=PreflightSpec(require_pad_visible=True))
+    holder = {}
+
+    def prepare(simulator):
+        simulator.params.set("PLND_ENABLED", 1)
+        simulator.params.set("PLND_TYPE", 1)
+
+    slow = BlankCamera(lambda: holder["clock"], rate_hz=5.0)
+
+    async def run():
+        from preland_app.runtime import mavlink as runtime
+
+        original = runtime.MavlinkVehicle
+
+        class Capturing(original):
+            def __init__(self, **kwargs):
+                super().__init__(**kwargs)
+                holder["clock"] = self.clock
+
+        runtime.MavlinkVehicle = Capturing
+        try:
+            served = ServedSimulator(mission, seed=1, speedup=4.0)
+            prepare(served.simulator)
+            try:
+                return await fly_mavlink(TrialRequest(mission=mission, seed=1, land_mode="marker"), url=served.url,
+                                         preflight=True, frame_source=slow), served.simulator.autopilot.armed
+            finally:
+                served.stop()
+        finally:
+            runtime.MavlinkVehicle = original
+
+    outcome, armed = asyncio.run(run())
+    assert not armed
+    failures = outcome.details["preflight_failures"]
+    assert any(f.startswith("camera: ") and "expected 30" in f for f in failures)
+    assert "pad: not in view of the camera" in failures
+    assert not any(f.startswith("PLND") for f in failures)
+
+
+def test_a_pilot_mode_change_stops_the_mission_within_a_vehicle_second(thesis_mission):
+    served = ServedSimulator(thesis_mission, seed=3, speedup=4.0)
+
+    async def main():
+        trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=thesis_mission, seed=3), url=served.url))
+        while served.simulator.autopilot.landed_state().name != "IN_AIR":
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(0.5)
+        changed = asyncio.get_running_loop().create_future()
+
+        def pilot():
+            served.simulator.autopilot.set_mode(FlightMode.LOITER)  # the pilot flips the mode switch
+            changed.get_loop().call_soon_threadsafe(changed.set_result, served.simulator.time_s)
+
+        served.loop.call_soon_threadsafe(pilot)
+        changed_at = await changed
+        outcome = await asyncio.wait_for(trial, timeout=30)
+        return outcome, changed_at, served.simulator.time_s, served.simulator.autopilot.mode
+
+    try:
+        outcome, changed_at, ended_at, mode_after = asyncio.run(main())
+    finally:
+        served.stop()
+    assert outcome.outcome is Outcome.PILOT_TAKEOVER and "LOITER" in outcome.message
+    assert ended_at - changed_at <= 1.0 + 0.3  # within a vehicle second (plus the report's own lag)
+    assert mode_after is FlightMode.LOITER  # preland did not switch it back
+
+
+def test_leaving_the_geofence_lands_and_ends_the_mission(thesis_mission):
+    mission = replace(thesis_mission, geofence=GeofenceSpec(max_distance_m=1.5, max_height_m=30.0, action="LAND"))
+    outcome = run_trial(TrialRequest(mission=mission, seed=2, record_trajectory=False))
+    assert outcome.outcome is Outcome.ABORTED and outcome.message.startswith("geofence:")
+    event = next(e for e in outcome.events if e.kind == "geofence")
+    assert event.data["action"] == "LAND"
+    assert [e.kind for e in outcome.events].count("waypoint") == 0
+
+
+def test_a_high_fence_does_not_trigger(thesis_mission):
+    mission = replace(thesis_mission, geofence=GeofenceSpec(max_distance_m=20.0, max_height_m=15.0))
+    assert run_trial(TrialRequest(mission=mission, seed=2, record_trajectory=False)).outcome is Outcome.LANDED
+
+
