@@ -128,6 +128,15 @@ def fly(
                                                 help="With --connect: a real camera (index, device, GStreamer "
                                                      "pipeline) or a video file instead of the virtual camera."),
     no_preflight: bool = typer.Option(False, "--no-preflight", help="With --connect: skip the preflight checks."),
+    detections_log: Optional[Path] = typer.Option(None, "--detections-log",
+                                                  help="With --connect: keep every detection in this CSV."),
+    record_video: Optional[Path] = typer.Option(None, "--record-video",
+                                                help="With --connect: keep the camera's frames in this video."),
+    record_to: Optional[Path] = typer.Option(None, "--record-to", metavar="DB",
+                                             help="With --connect: after landing, ask for the measured result and "
+                                                  "store it (as `preland trial record`) in this results database."),
+    campaign_name: Optional[str] = typer.Option(None, "--campaign", help="With --record-to: the campaign."),
+    scenario_label: Optional[str] = typer.Option(None, "--scenario", help="With --record-to: the scenario."),
     fault_listen: Optional[str] = typer.Option(None, "--fault-listen", metavar="URL",
                                                help="With --connect: take fault commands (preland fault send) "
                                                     "on this UDP address, e.g. udp://127.0.0.1:14560."),
@@ -171,9 +180,13 @@ def fly(
         from .runtime.mavlink import run_mavlink_trial
 
         try:
+            if record_to is not None and (not campaign_name or not scenario_label):
+                raise fail("--record-to needs --campaign and --scenario")
             outcome = run_mavlink_trial(request, url=connect, truth=not no_truth,
                                         tlog_path=str(tlog) if tlog else None, fault_listen=fault_listen,
-                                        preflight=not no_preflight, camera_source=camera_source)
+                                        preflight=not no_preflight, camera_source=camera_source,
+                                        detection_log=str(detections_log) if detections_log else None,
+                                        video_path=str(record_video) if record_video else None)
         except PrelandError as error:
             raise fail(f"--connect {connect}: {error}", code=EXIT_FAILED) from None
         except KeyboardInterrupt:
@@ -194,8 +207,28 @@ def fly(
             typer.echo("")
             for event in data["events"]:
                 typer.echo(f"{event['time_s']:8.2f} s  {event['kind']:<13} {event['message']}")
+    if connect is not None and record_to is not None and outcome.outcome.value == "landed":
+        _prompt_and_record(record_to, campaign_name, scenario_label, outcome.land_mode,
+                           outcome.takeoff_altitude_rel_m)
     if outcome.outcome.value != "landed":
         raise typer.Exit(EXIT_FAILED)
+
+
+def _prompt_and_record(db: Path, campaign: str, scenario: str, land_mode: str, takeoff_altitude_m: float) -> None:
+    """Ask for the tape-measured result and store it as a field trial (blank error: nothing stored)."""
+    answer = typer.prompt("measured landing error in cm (blank to skip)", default="", show_default=False)
+    if not answer.strip():
+        typer.echo("nothing recorded")
+        return
+    try:
+        error_cm = float(answer)
+        x_cm = float(typer.prompt("offset north (x) in cm", default="0"))
+        y_cm = float(typer.prompt("offset east (y) in cm", default="0"))
+    except ValueError:
+        raise fail("the measured values must be numbers") from None
+    trial_record(db=db, campaign=campaign, scenario=scenario, error_cm=error_cm, x_cm=x_cm, y_cm=y_cm,
+                 landing_time_s=None, outcome="landed", land_mode=land_mode, takeoff_altitude_m=takeoff_altitude_m,
+                 note="recorded at the end of preland fly")
 
 
 pad_app = typer.Typer(help="Landing pads: render printable pads.", no_args_is_help=True)

@@ -14,6 +14,7 @@ from preland_app.sensing.camera import RPI_CAMERA_V2_640X480, Frame
 from preland_app.sim.spec import NavigationSpec
 from preland_app.vehicle.types import FlightMode
 
+from .conftest import ROOT
 from .test_mavlink_runtime import ServedSimulator
 
 
@@ -48,7 +49,8 @@ def _preflight(mission, *, seed=1, mode="normal", prepare=None, frame_source=Non
 def test_no_gps_fix_refuses_take_off(thesis_mission):
     environment = replace(thesis_mission.environment,
                           navigation=NavigationSpec(gps_fix_delay_s=1e6))
-    outcome, armed = _preflight(replace(thesis_mission, environment=environment))
+    outcome, armed = _preflight(replace(thesis_mission, environment=environment,
+                                        preflight=PreflightSpec(gps_wait_s=2.0)))
     assert outcome.outcome is Outcome.ABORTED and not armed
     assert outcome.details["preflight_failures"] == ["GPS: no 3D fix / position estimate not healthy yet"]
 
@@ -154,3 +156,37 @@ def test_a_high_fence_does_not_trigger(thesis_mission):
     assert run_trial(TrialRequest(mission=mission, seed=2, record_trajectory=False)).outcome is Outcome.LANDED
 
 
+
+
+def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(thesis_mission, tmp_path):
+    """fly --connect with the detection log, the video and the end-of-flight prompt, against the simulator's face."""
+    from typer.testing import CliRunner
+
+    from preland_app.campaign.store import ResultsStore
+    from preland_app.cli import app
+
+    mission_path = tmp_path / "mission.yaml"
+    text = (ROOT / "missions" / "thesis_square_land.yaml").read_text()
+    mission_path.write_text(text.replace("  mode: normal", "  mode: marker").replace(
+        "pad:\n", "params:\n  PLND_ENABLED: 1\n  PLND_TYPE: 1\npad:\n").replace(
+        "preset: thesis", "preset: thesis"))
+    served = ServedSimulator(thesis_mission, seed=2, speedup=3.0)
+    served.simulator.params.set("PLND_ENABLED", 1)
+    served.simulator.params.set("PLND_TYPE", 1)
+    db, log, video = tmp_path / "field.db", tmp_path / "detections.csv", tmp_path / "flight.mkv"
+    try:
+        result = CliRunner().invoke(app, [
+            "fly", str(mission_path), "--connect", served.url, "--detections-log", str(log), "--record-video",
+            str(video), "--record-to", str(db), "--campaign", "field_day", "--scenario", "Marker / none", "--json",
+        ], input="7.5\n5\n-5.5\n")
+    finally:
+        served.stop()
+    assert result.exit_code == 0, result.output
+    assert "recorded field trial 0 of field_day / Marker / none: 7.5 cm" in result.output, result.output
+    rows = log.read_text().splitlines()
+    assert rows[0].startswith("time_s,markers,chosen_id") and len(rows) > 100
+    assert video.stat().st_size > 100_000
+    with ResultsStore(db) as store:
+        (trial,) = store.trials("field_day")
+        assert trial["source"] == "field" and trial["landing_error_cm"] == 7.5 and trial["offset_east_cm"] == -5.5
+        assert trial["land_mode"] == "marker"

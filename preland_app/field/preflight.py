@@ -20,10 +20,12 @@ from ..vehicle.protocol import Vehicle
 
 @dataclass(frozen=True)
 class PreflightSpec:
-    """`min_battery_pct`: refuse below this charge; `camera_min_rate_fraction`: refuse a camera slower than
+    """`min_battery_pct`: refuse below this charge; `gps_wait_s`: how long (vehicle s) to wait for a 3D fix
+    and a healthy estimate before refusing; `camera_min_rate_fraction`: refuse a camera slower than
     this fraction of its frame rate; `require_pad_visible`: refuse unless the pad is detected before take-off."""
 
     min_battery_pct: float = 30.0
+    gps_wait_s: float = 30.0
     camera_min_rate_fraction: float = 0.8
     camera_check_frames: int = 15
     require_pad_visible: bool = False
@@ -32,6 +34,7 @@ class PreflightSpec:
         require(0 <= self.min_battery_pct <= 100, "min_battery_pct", "must be within 0..100 %")
         require(0 < self.camera_min_rate_fraction <= 1, "camera_min_rate_fraction", "must be within 0..1")
         require(self.camera_check_frames >= 2, "camera_check_frames", "must be >= 2")
+        require(self.gps_wait_s >= 0, "gps_wait_s", "must be >= 0 s")
 
 
 class PreflightFailed(PrelandError):
@@ -51,6 +54,10 @@ async def run_preflight(*, vehicle: Vehicle, clock: Clock, spec: PreflightSpec, 
     except PrelandError as error:
         raise PreflightFailed([f"link: {error}"]) from None
     passed.append("link: telemetry arriving")
+    deadline_s = clock.now_s() + spec.gps_wait_s
+    while not telemetry.position_ok and clock.now_s() < deadline_s:
+        await clock.sleep(0.5)
+        telemetry = await vehicle.telemetry()
     if telemetry.position_ok:
         passed.append("GPS: 3D fix, position estimate healthy")
     else:

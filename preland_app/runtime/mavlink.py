@@ -19,6 +19,7 @@ from ..geo import GeoPoint, LocalTangentPlane
 from ..field.preflight import PreflightFailed, run_preflight
 from ..landing.base import ScoringReference
 from ..landing.precision import PrecisionLanding
+from ..sensing.logging import LoggingDetector, RecordingFrameSource
 from ..sensing.marker import TrackingMarkerDetector
 from ..mavlink.fault_message import listen
 from ..sensing.faults import FaultCommand
@@ -62,12 +63,14 @@ class SimStateTruth:
 
 async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, link_timeout_s: float = 5.0,
                       tlog_path: str | None = None, fault_listen: str | None = None, preflight: bool = False,
-                      camera_source: str | None = None, frame_source=None) -> TrialOutcome:
+                      camera_source: str | None = None, frame_source=None, detection_log: str | None = None,
+                      video_path: str | None = None) -> TrialOutcome:
     """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time).
     `tlog_path`: write every MAVLink message received to this telemetry log. `fault_listen`: a UDP address
     where PRELAND_FAULT_INJECTION commands change the land mode's faults while it flies. `preflight`: run
     the preflight checks first and refuse take-off when one fails. `camera_source` (a capture device or a
-    video file) or `frame_source` (any FrameSource) replaces the virtual camera."""
+    video file) or `frame_source` (any FrameSource) replaces the virtual camera. `detection_log` (CSV) and
+    `video_path` keep every detection and every frame the companion saw."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
     vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path)
@@ -86,11 +89,20 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     if real_camera is not None:
         sensors.camera = real_camera
         sensors.marker_detector = TrackingMarkerDetector(pad=mission.pad_spec(), camera=real_camera.camera)
+    kept = []
+    if sensors.camera is not None and video_path:
+        sensors.camera = RecordingFrameSource(source=sensors.camera, path=video_path)
+        kept.append(sensors.camera)
+    if sensors.marker_detector is not None and detection_log:
+        sensors.marker_detector = LoggingDetector(detector=sensors.marker_detector, path=detection_log, clock=clock)
+        kept.append(sensors.marker_detector)
     if preflight:
         try:
             passed = await run_preflight(vehicle=vehicle, clock=clock, spec=mission.preflight,
                                          precision=isinstance(strategy, PrecisionLanding), sensors=sensors)
         except PreflightFailed as error:
+            for keeper in kept:
+                keeper.close()
             await vehicle.close()
             return TrialOutcome(outcome=Outcome.ABORTED, message=str(error), seed=request.seed, mission=mission.name,
                                 land_mode=mission.land.mode, takeoff_altitude_rel_m=mission.takeoff_altitude_rel_m(),
@@ -138,6 +150,8 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         await asyncio.gather(recording, return_exceptions=True)
         if listener is not None:
             listener.close()
+        for keeper in kept:
+            keeper.close()
         await vehicle.close()
     trajectory = recorder.array()
     score = touchdown = None
@@ -187,10 +201,7 @@ def _no_truth() -> CameraPose:
     raise PrelandError("this runtime has no ground truth: simulated sensors cannot be used (use a real camera)")
 
 
-def run_mavlink_trial(request: TrialRequest, *, url: str, truth: bool = True, tlog_path: str | None = None,
-                      fault_listen: str | None = None, preflight: bool = False,
-                      camera_source: str | None = None) -> TrialOutcome:
-    return asyncio.run(fly_mavlink(request, url=url, truth=truth, tlog_path=tlog_path, fault_listen=fault_listen,
-                                   preflight=preflight, camera_source=camera_source))
+def run_mavlink_trial(request: TrialRequest, *, url: str, **options) -> TrialOutcome:
+    return asyncio.run(fly_mavlink(request, url=url, **options))
 
 
