@@ -115,3 +115,19 @@ class TrialOutcome:
         if include_events:
             data["events"] = [event.to_dict() for event in self.events]
         return data
+
+
+def outcome_for_error(error: Exception) -> tuple[Outcome, str]:
+    """How a trial that ended with `error` is recorded: its outcome and a readable message."""
+    from .errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
+    from .field.takeover import PilotTakeover
+
+    for kind, outcome in ((WaitTimeout, Outcome.TIMED_OUT), (MissionAborted, Outcome.ABORTED),
+                          (VehicleCrashed, Outcome.CRASHED), (LinkLost, Outcome.LINK_LOST),
+                          (PilotTakeover, Outcome.PILOT_TAKEOVER)):
+        if isinstance(error, kind):
+            return outcome, str(error)
+    if isinstance(error, PrelandError):
+        return Outcome.ERROR, f"{type(error).__name__}: {error}"
+    # A bug must still end as this trial's outcome, not kill a campaign.
+    return Outcome.ERROR, f"unexpected {type(error).__name__}: {error}"

@@ -9,12 +9,10 @@ from dataclasses import dataclass
 
 from ..clock import LoopClock, run_virtual
 from ..config.mission import MissionSpec
-from ..field.takeover import PilotTakeover
-from ..errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
 from ..events import EventLog
 from ..landing.base import ScoringReference
 from ..mission import MissionReport, MissionRunner
-from ..outcome import Outcome, TrialOutcome, score_touchdown
+from ..outcome import Outcome, TrialOutcome, outcome_for_error, score_touchdown
 from ..sim.noise import child_rng
 from ..sim.simulator import Simulator
 from ..vehicle.sim_backend import SimVehicle
@@ -79,20 +77,8 @@ async def fly_embedded(request: TrialRequest) -> TrialOutcome:
     recording = asyncio.ensure_future(recorder.run()) if request.record_trajectory else None
     try:
         await runner.run()
-    except WaitTimeout as error:
-        outcome, message = Outcome.TIMED_OUT, str(error)
-    except MissionAborted as error:
-        outcome, message = Outcome.ABORTED, str(error)
-    except VehicleCrashed as error:
-        outcome, message = Outcome.CRASHED, str(error)
-    except LinkLost as error:
-        outcome, message = Outcome.LINK_LOST, str(error)
-    except PilotTakeover as error:
-        outcome, message = Outcome.PILOT_TAKEOVER, str(error)
-    except PrelandError as error:
-        outcome, message = Outcome.ERROR, f"{type(error).__name__}: {error}"
-    except Exception as error:  # a bug must still end as this trial's outcome, not kill a campaign
-        outcome, message = Outcome.ERROR, f"unexpected {type(error).__name__}: {error}"
+    except Exception as error:  # every failure is recorded as this trial's outcome
+        outcome, message = outcome_for_error(error)
     finally:
         if recording is not None:
             recording.cancel()

@@ -12,8 +12,7 @@ from __future__ import annotations
 
 import asyncio
 
-from ..field.takeover import PilotTakeover
-from ..errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
+from ..errors import PrelandError
 from ..events import EventLog
 from ..geo import GeoPoint, LocalTangentPlane
 from ..field.preflight import PreflightFailed, run_preflight
@@ -24,7 +23,7 @@ from ..sensing.marker import TrackingMarkerDetector
 from ..mavlink.fault_message import listen
 from ..sensing.faults import FaultCommand
 from ..mission import MissionRunner
-from ..outcome import Outcome, TrialOutcome, score_touchdown
+from ..outcome import Outcome, TrialOutcome, outcome_for_error, score_touchdown
 from ..sensing.virtual_camera import CameraPose
 from ..sim.noise import child_rng
 from ..vehicle.mavlink_backend import MavlinkVehicle
@@ -131,20 +130,8 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     outcome, message = Outcome.LANDED, Outcome.LANDED.description
     try:
         await runner.run()
-    except WaitTimeout as error:
-        outcome, message = Outcome.TIMED_OUT, str(error)
-    except LinkLost as error:
-        outcome, message = Outcome.LINK_LOST, str(error)
-    except PilotTakeover as error:
-        outcome, message = Outcome.PILOT_TAKEOVER, str(error)
-    except MissionAborted as error:
-        outcome, message = Outcome.ABORTED, str(error)
-    except VehicleCrashed as error:
-        outcome, message = Outcome.CRASHED, str(error)
-    except PrelandError as error:
-        outcome, message = Outcome.ERROR, f"{type(error).__name__}: {error}"
-    except Exception as error:  # a bug is this trial's outcome, not a crash of the campaign
-        outcome, message = Outcome.ERROR, f"unexpected {type(error).__name__}: {error}"
+    except Exception as error:  # every failure is recorded as this trial's outcome
+        outcome, message = outcome_for_error(error)
     finally:
         recording.cancel()
         await asyncio.gather(recording, return_exceptions=True)
