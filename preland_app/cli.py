@@ -169,8 +169,12 @@ def fly(
         from .runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial
 
         try:
-            options = SitlOptions(binary=resolve_sitl_binary(sitl or None), speedup=sitl_speedup,
-                                  defaults=tuple(sitl_defaults), tlog_dir=tlog.parent if tlog else None)
+            binary = resolve_sitl_binary(sitl or None)
+        except PrelandError as error:  # a missing binary is bad input, as for `campaign run --sitl`
+            raise fail(f"--sitl: {error}") from None
+        options = SitlOptions(binary=binary, speedup=sitl_speedup, defaults=tuple(sitl_defaults),
+                              tlog_dir=tlog.parent if tlog else None)
+        try:
             outcome = run_sitl_trial(request, options=options, tlog_name=tlog.name if tlog else None)
         except PrelandError as error:
             raise fail(f"--sitl: {error}", code=EXIT_FAILED) from None
