@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .dynamics import GRAVITY_M_S2
 from .noise import GaussianStream, GaussMarkov, SmoothGaussMarkov
 from .spec import NavigationSpec
 
@@ -66,8 +67,11 @@ class NavigationModel:
         self.elapsed_s = 0.0
 
     def step(self, *, dt_s: float, north_m: float, east_m: float, down_m: float,
-             velocity_ned_m_s: tuple[float, float, float], tilt_cos: float) -> NavEstimate:
-        """Advance error processes by `dt_s` and return the estimate of the given true state."""
+             velocity_ned_m_s: tuple[float, float, float], tilt_cos: float, yaw_rad: float = 0.0) -> NavEstimate:
+        """Advance error processes by `dt_s` and return the estimate of the given true state.
+
+        `yaw_rad` (true heading, NED) turns the attitude error's gravity leak from body to NED axes.
+        """
         self.elapsed_s += dt_s
         spec = self.spec
         error_north = self._drift_north.step(dt_s) + self._fast_north.step(dt_s)
@@ -75,7 +79,8 @@ class NavigationModel:
         error_down = -(self._baro_drift.step(dt_s) + self._baro_noise.step(dt_s) - self._baro_origin_m)
         velocity_sigma = spec.velocity_noise_sigma_m_s
         noise = self._noise
-        # IMU delta-velocity over the step (true change plus accelerometer noise).
+        # IMU delta-velocity over the step (true change plus accelerometer noise, plus the gravity
+        # leak below).
         previous = self._previous_velocity or (velocity_ned_m_s[0], velocity_ned_m_s[1])
         self._previous_velocity = (velocity_ned_m_s[0], velocity_ned_m_s[1])
         accel_noise = spec.imu_accel_noise_m_s2 * dt_s
@@ -87,19 +92,33 @@ class NavigationModel:
             slant_m = height_m / max(tilt_cos, 0.3) + spec.rangefinder_noise_sigma_m * noise.next()
             if self.rangefinder_min_m <= slant_m <= self.rangefinder_max_m:
                 rangefinder_m = slant_m * tilt_cos
+        velocity_north_m_s = velocity_ned_m_s[0] + velocity_sigma * noise.next()
+        velocity_east_m_s = velocity_ned_m_s[1] + velocity_sigma * noise.next()
+        velocity_down_m_s = velocity_ned_m_s[2] + velocity_sigma * noise.next()
+        roll_error_rad = self._roll_error.step(dt_s)
+        pitch_error_rad = self._pitch_error.step(dt_s)
+        # The EKF rotates the accelerometers' specific force (about g upwards) with its own attitude,
+        # so an attitude error leaks gravity into the NED delta-velocity: body (forward, right)
+        # error (-g * pitch error, g * roll error). It is what makes dead-reckoning between sensor
+        # values drift.
+        leak_forward = -GRAVITY_M_S2 * pitch_error_rad * dt_s
+        leak_right = GRAVITY_M_S2 * roll_error_rad * dt_s
+        cos_yaw, sin_yaw = math.cos(yaw_rad), math.sin(yaw_rad)
+        delta_north += cos_yaw * leak_forward - sin_yaw * leak_right
+        delta_east += sin_yaw * leak_forward + cos_yaw * leak_right
         return NavEstimate(
             position_ok=self.elapsed_s >= spec.gps_fix_delay_s,
             north_m=north_m + error_north,
             east_m=east_m + error_east,
             down_m=down_m + error_down,
-            velocity_north_m_s=velocity_ned_m_s[0] + velocity_sigma * noise.next(),
-            velocity_east_m_s=velocity_ned_m_s[1] + velocity_sigma * noise.next(),
-            velocity_down_m_s=velocity_ned_m_s[2] + velocity_sigma * noise.next(),
+            velocity_north_m_s=velocity_north_m_s,
+            velocity_east_m_s=velocity_east_m_s,
+            velocity_down_m_s=velocity_down_m_s,
             rangefinder_m=rangefinder_m,
             gps_error_north_m=error_north,
             gps_error_east_m=error_east,
-            roll_error_rad=self._roll_error.step(dt_s),
-            pitch_error_rad=self._pitch_error.step(dt_s),
+            roll_error_rad=roll_error_rad,
+            pitch_error_rad=pitch_error_rad,
             delta_velocity_north_m_s=delta_north,
             delta_velocity_east_m_s=delta_east,
         )

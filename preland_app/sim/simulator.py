@@ -79,6 +79,7 @@ class Simulator:
             down_m=s.down_m,
             velocity_ned_m_s=(s.velocity_north_m_s, s.velocity_east_m_s, s.velocity_down_m_s),
             tilt_cos=tilt_cosine(s.roll_rad, s.pitch_rad),
+            yaw_rad=s.yaw_rad,
         )
 
     def step(self) -> None:
