@@ -31,6 +31,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/normal_landing_table.py
 	$(VENV)/bin/python benchmarks/land_modes_table.py
 	$(VENV)/bin/python benchmarks/fault_scenarios_table.py
+	$(VENV)/bin/python benchmarks/drop_rate_sensitivity.py
 	$(VENV)/bin/python benchmarks/paper_table.py
 
 clean:
