@@ -433,8 +433,10 @@ app.add_typer(sim_app, name="sim")
 
 @sim_app.command("serve")
 def sim_serve(
-    listen: str = typer.Option("udp:127.0.0.1:14550", "--listen",
-                               help="UDP address to serve on (localhost unless told otherwise)."),
+    listen: list[str] = typer.Option(["udp:127.0.0.1:14550"], "--listen", metavar="UDP:HOST:PORT",
+                                     help="UDP address to serve on (localhost unless told otherwise). Repeat it "
+                                          "for more channels, as ArduPilot's serial ports: one for preland, "
+                                          "one for a ground station."),
     speedup: float = typer.Option(1.0, "--speedup", help="Simulated seconds per wall second."),
     seed: int = typer.Option(1, "--seed", help="Simulator seed (wind, GPS error, noise)."),
     mission_file: Optional[Path] = typer.Option(None, "--mission",
@@ -462,7 +464,7 @@ def sim_serve(
     async def main() -> None:
         simulator = Simulator(seed=seed, environment=environment, params=params, initial_yaw_deg=yaw)
         face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=speedup), listen=listen)
-        typer.echo(f"serving the embedded simulator on {listen} at {speedup:g}x (Ctrl-C to stop)")
+        typer.echo(f"serving the embedded simulator on {', '.join(listen)} at {speedup:g}x (Ctrl-C to stop)")
         await face.run()
 
     try:

@@ -170,7 +170,9 @@ def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(the
     mission_path.write_text(text.replace("  mode: normal", "  mode: marker").replace(
         "pad:\n", "params:\n  PLND_ENABLED: 1\n  PLND_TYPE: 1\npad:\n").replace(
         "preset: thesis", "preset: thesis"))
-    served = ServedSimulator(thesis_mission, seed=2, speedup=3.0)
+    # 2x wall speed: the camera renders, detects and records 60 frames per wall second, which a loaded
+    # 2-core machine still keeps up with (the preflight refuses a camera below 80 % of its rate).
+    served = ServedSimulator(thesis_mission, seed=2, speedup=2.0)
     served.simulator.params.set("PLND_ENABLED", 1)
     served.simulator.params.set("PLND_TYPE", 1)
     db, log, video = tmp_path / "field.db", tmp_path / "detections.csv", tmp_path / "flight.mkv"

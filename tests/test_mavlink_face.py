@@ -1,6 +1,7 @@
 """The embedded simulator's MAVLink face, driven by a plain pymavlink client on localhost."""
 
 import asyncio
+import contextlib
 import socket
 import threading
 import time
@@ -23,20 +24,23 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.fixture()
-def served():
-    """A face on a free localhost port, run in a thread with its own event loop."""
-    port = free_port()
+@contextlib.contextmanager
+def serving(channels: int):
+    """A face on `channels` free localhost ports, run in a thread with its own event loop; yields one
+    pymavlink client per port, the simulator and the face."""
+    ports = [free_port() for _ in range(channels)]
     simulator = Simulator(seed=3, environment=EnvironmentSpec(wind=WindSpec(speed_m_s=0.0, turbulence_w20_m_s=0.0)))
     loop = asyncio.new_event_loop()
     face_box = {}
+    started = threading.Event()
 
     def run():
         asyncio.set_event_loop(loop)
         face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=SPEEDUP),
-                           listen=f"udp:127.0.0.1:{port}")
+                           listen=[f"udp:127.0.0.1:{port}" for port in ports])
         face_box["face"] = face
         face_box["task"] = loop.create_task(face.run())
+        started.set()
         try:
             loop.run_until_complete(face_box["task"])
         except asyncio.CancelledError:
@@ -44,11 +48,23 @@ def served():
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
-    client = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega")
-    yield client, simulator, face_box
-    loop.call_soon_threadsafe(face_box["task"].cancel)
-    thread.join(timeout=5)
-    client.close()
+    assert started.wait(timeout=10)
+    clients = [mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255 - i,
+                                          dialect="ardupilotmega") for i, port in enumerate(ports)]
+    try:
+        yield clients, simulator, face_box
+    finally:
+        loop.call_soon_threadsafe(face_box["task"].cancel)
+        thread.join(timeout=5)
+        for client in clients:
+            client.close()
+
+
+@pytest.fixture()
+def served():
+    """A face on one free localhost port."""
+    with serving(1) as (clients, simulator, face_box):
+        yield clients[0], simulator, face_box
 
 
 def wait_for(client, message_type, *, timeout_s=10.0, condition=lambda m: True):
@@ -141,3 +157,40 @@ def test_unknown_commands_and_bad_addresses(served):
     assert command(client, mavlink2.MAV_CMD_DO_FLIGHTTERMINATION, 1).result == mavlink2.MAV_RESULT_UNSUPPORTED
     with pytest.raises(MavlinkFaceError, match="udp:HOST:PORT"):
         parse_listen("tcp:localhost")
+
+
+def test_a_ground_station_watches_on_its_own_channel_while_the_companion_flies():
+    with serving(2) as ((companion, gcs), simulator, _):
+        wait_for(companion, "HEARTBEAT")
+        wait_for(gcs, "HEARTBEAT")
+        # A refusal the companion provokes (no position estimate yet) is told on every channel.
+        assert command(companion, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink2.MAV_RESULT_DENIED
+        wait_for(gcs, "STATUSTEXT", condition=lambda m: "Need Position Estimate" in m.text)
+        # Stream rates are per channel, as ArduPilot's SRn_ parameters are per serial port.
+        command(companion, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 1e5)
+        wait_for(companion, "GLOBAL_POSITION_INT")
+        command(gcs, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink2.MAVLINK_MSG_ID_ATTITUDE, 1e5)
+        wait_for(gcs, "ATTITUDE")
+        assert gcs.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=0.5) is None
+        # A parameter the ground station sets comes back on the companion's channel too.
+        gcs.mav.param_set_send(1, 1, b"LAND_SPEED", 35.0, mavlink2.MAV_PARAM_TYPE_REAL32)
+        wait_for(companion, "PARAM_VALUE", condition=lambda m: m.param_id == "LAND_SPEED" and m.param_value == 35.0)
+        # The companion flies; the ground station sees it armed in GUIDED, then climbing.
+        time.sleep(3.5 / SPEEDUP + 0.2)
+        assert command(companion, mavlink2.MAV_CMD_DO_SET_MODE, 1, 4).result == mavlink2.MAV_RESULT_ACCEPTED
+        assert command(companion, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink2.MAV_RESULT_ACCEPTED
+        assert command(companion, mavlink2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 5).result == \
+            mavlink2.MAV_RESULT_ACCEPTED
+        heartbeat = wait_for(gcs, "HEARTBEAT", condition=lambda m: m.base_mode & mavlink2.MAV_MODE_FLAG_SAFETY_ARMED)
+        assert heartbeat.custom_mode == 4
+        command(gcs, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 1e5)
+        climbed = wait_for(gcs, "GLOBAL_POSITION_INT", condition=lambda m: m.relative_alt > 3000, timeout_s=15)
+        assert abs(climbed.relative_alt / 1000 + simulator.nav.down_m - simulator.autopilot.home_down_m) < 1.0
+
+
+def test_the_same_address_twice_is_refused():
+    port = free_port()
+    simulator = Simulator(seed=3)
+    with pytest.raises(MavlinkFaceError, match="the same address twice"):
+        MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=1.0),
+                    listen=[f"udp:127.0.0.1:{port}", f"udp:127.0.0.1:{port}"])

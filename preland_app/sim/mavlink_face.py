@@ -1,10 +1,13 @@
 """The embedded simulator as a MAVLink system that behaves like ArduCopter, for what preland and a
 ground station use.
 
-It speaks MAVLink 2 (the ardupilotmega dialect, through pymavlink) on a UDP
-port, bound to localhost unless told otherwise, and replies to whoever talks to
-it. Like ArduPilot it streams nothing but HEARTBEAT until asked
-(MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM). It handles COMMAND_LONG
+It speaks MAVLink 2 (the ardupilotmega dialect, through pymavlink) on one or
+more UDP ports, bound to localhost unless told otherwise. Each port is a
+channel, as an ArduPilot serial port is: it answers whoever talks to it there
+and keeps its own stream rates, so preland can fly on one port while a ground
+station watches on another. Like ArduPilot it streams nothing but HEARTBEAT
+until asked (MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM) on that
+channel; STATUSTEXT and changed parameters go to every channel. It handles COMMAND_LONG
 (arm/disarm, take-off, land, RTL, set mode, message intervals, message
 requests), SET_MODE, SET_POSITION_TARGET_LOCAL_NED (positions and velocities,
 local and body frames), SET_POSITION_TARGET_GLOBAL_INT, LANDING_TARGET and the
@@ -18,6 +21,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
@@ -63,31 +67,64 @@ def parse_listen(address: str) -> str:
     return f"{'udpout' if scheme in ('udpclient', 'udpout') else 'udpin'}:{host}:{port}"
 
 
-class MavlinkFace:
-    """Serves one `Simulator` over MAVLink on a clock (wall time times a speed-up in practice)."""
+class _Channel:
+    """One MAVLink port, as an ArduPilot serial port: its own peer and its own stream rates."""
 
-    def __init__(self, *, simulator: Simulator, clock: Clock, listen: str = "udp:127.0.0.1:14550",
-                 system_id: int = 1) -> None:
-        self.simulator = simulator
-        self.clock = clock
+    def __init__(self, *, listen: str, system_id: int) -> None:
+        self.listen = listen
         try:
             self.connection = mavutil.mavlink_connection(parse_listen(listen), source_system=system_id,
                                                          source_component=1, dialect="ardupilotmega")
         except OSError as error:
             raise MavlinkFaceError(f"--listen {listen!r}: {error.strerror or error}") from None
         self.mav = self.connection.mav
+        self.intervals_s: dict[int, float] = {k: 1.0 / v for k, v in _STREAMS_DEFAULT_HZ.items()}
+        self.next_send_s: dict[int, float] = {}
+        # Sending first (udpclient) needs no peer to have spoken; listening waits for one.
+        self.peer_seen = parse_listen(listen).startswith("udpout")
+
+
+class MavlinkFace:
+    """Serves one `Simulator` over MAVLink on a clock (wall time times a speed-up in practice).
+
+    `listen`: one address or several (one channel each), `udp:HOST:PORT` or `udpclient:HOST:PORT`.
+    """
+
+    def __init__(self, *, simulator: Simulator, clock: Clock, listen: str | Sequence[str] = "udp:127.0.0.1:14550",
+                 system_id: int = 1) -> None:
+        self.simulator = simulator
+        self.clock = clock
+        addresses = (listen,) if isinstance(listen, str) else tuple(listen)
+        if not addresses:
+            raise MavlinkFaceError("--listen: at least one address is needed")
+        if len(set(addresses)) != len(addresses):
+            raise MavlinkFaceError(f"--listen: the same address twice in {', '.join(addresses)}")
+        self.channels: list[_Channel] = []
+        try:
+            for address in addresses:
+                self.channels.append(_Channel(listen=address, system_id=system_id))
+        except MavlinkFaceError:
+            self._close()
+            raise
+        self._channel = self.channels[0]  # the channel being served: replies go back on it
         self.plane = LocalTangentPlane(simulator.origin)
         self.heartbeats_enabled = True  # a test can silence them to simulate a lost link
-        self.intervals_s: dict[int, float] = {k: 1.0 / v for k, v in _STREAMS_DEFAULT_HZ.items()}
-        self._next_send_s: dict[int, float] = {}
         self._messages_sent = 0
-        # Sending first (udpclient) needs no peer to have spoken; listening waits for one.
-        self._peer_seen = parse_listen(listen).startswith("udpout")
         self.landing_targets = 0
         self._param_names = sorted(ARDUCOPTER_PARAMS)
         self._status_sent = 0
 
     # ---------------------------------------------------------------- running
+
+    @property
+    def mav(self):
+        """The pymavlink sender of the channel being served."""
+        return self._channel.mav
+
+    @property
+    def intervals_s(self) -> dict[int, float]:
+        """Stream intervals (s) by message id, of the channel being served."""
+        return self._channel.intervals_s
 
     async def run(self) -> None:
         """Step the simulator and serve MAVLink until cancelled."""
@@ -97,12 +134,20 @@ class MavlinkFace:
             while True:
                 await self.clock.sleep(dt_s)
                 sim.step()
-                self._receive_all()
+                for channel in self.channels:
+                    self._channel = channel
+                    self._receive_all()
                 self._flush_status_text()
-                if self._peer_seen:
-                    self._send_streams()
+                for channel in self.channels:
+                    if channel.peer_seen:
+                        self._channel = channel
+                        self._send_streams()
         finally:
-            self.connection.close()
+            self._close()
+
+    def _close(self) -> None:
+        for channel in self.channels:
+            channel.connection.close()
 
     def time_boot_ms(self) -> int:
         return int(self.simulator.time_s * 1000) & 0xFFFFFFFF
@@ -110,12 +155,12 @@ class MavlinkFace:
     def _receive_all(self) -> None:
         while True:
             try:
-                message = self.connection.recv_match(blocking=False)
+                message = self._channel.connection.recv_match(blocking=False)
             except (OSError, ValueError):
                 return
             if message is None:
                 return
-            self._peer_seen = True
+            self._channel.peer_seen = True
             handler = getattr(self, f"_on_{message.get_type().lower()}", None)
             if handler is not None:
                 handler(message)
@@ -124,10 +169,11 @@ class MavlinkFace:
 
     def _send_streams(self) -> None:
         now = self.simulator.time_s
+        next_send_s = self._channel.next_send_s
         for message_id, interval_s in list(self.intervals_s.items()):
-            if interval_s <= 0 or now < self._next_send_s.get(message_id, 0.0):
+            if interval_s <= 0 or now < next_send_s.get(message_id, 0.0):
                 continue
-            self._next_send_s[message_id] = now + interval_s
+            next_send_s[message_id] = now + interval_s
             self.send_message(message_id)
 
     def send_message(self, message_id: int) -> bool:
@@ -255,12 +301,14 @@ class MavlinkFace:
     def _flush_status_text(self) -> None:
         messages = self.simulator.autopilot.messages
         for status in messages[self._status_sent:]:
-            if self._peer_seen:
-                self.mav.statustext_send(mavlink2.MAV_SEVERITY_INFO, status.text.encode("ascii", "replace")[:50])
+            self._say(status.text, mavlink2.MAV_SEVERITY_INFO)
         self._status_sent = len(messages)
 
     def _say(self, text: str, severity: int = mavlink2.MAV_SEVERITY_WARNING) -> None:
-        self.mav.statustext_send(severity, text.encode("ascii", "replace")[:50])
+        """STATUSTEXT on every channel with a peer (ArduPilot's send_text goes to all)."""
+        for channel in self.channels:
+            if channel.peer_seen:
+                channel.mav.statustext_send(severity, text.encode("ascii", "replace")[:50])
 
     def _ack(self, command: int, result: int) -> None:
         self.mav.command_ack_send(command, result)
@@ -377,10 +425,12 @@ class MavlinkFace:
             timestamp_s=capture_s, angle_x_rad=message.angle_x, angle_y_rad=message.angle_y,
             distance_m=message.distance if message.distance > 0 else None, target_num=message.target_num))
 
-    def _param_value(self, name: str) -> None:
+    def _param_value(self, name: str, *, every_channel: bool = False) -> None:
         index = self._param_names.index(name)
-        self.mav.param_value_send(name.encode("ascii"), self.simulator.params.get(name),
-                                  mavlink2.MAV_PARAM_TYPE_REAL32, len(self._param_names), index)
+        channels = [c for c in self.channels if c.peer_seen] if every_channel else [self._channel]
+        for channel in channels:
+            channel.mav.param_value_send(name.encode("ascii"), self.simulator.params.get(name),
+                                         mavlink2.MAV_PARAM_TYPE_REAL32, len(self._param_names), index)
 
     def _on_param_request_list(self, message) -> None:
         for name in self._param_names:
@@ -404,10 +454,10 @@ class MavlinkFace:
             self.simulator.params.set(name, message.param_value)
         except ValueError as error:
             self._say(str(error))
-        self._param_value(name)  # the value now in force, as ArduPilot answers
+        self._param_value(name, every_channel=True)  # the value now in force, on every channel, as ArduPilot
 
 
-async def serve(*, simulator: Simulator, clock: Clock, listen: str) -> None:
+async def serve(*, simulator: Simulator, clock: Clock, listen: str | Sequence[str]) -> None:
     """Serve until cancelled."""
     await MavlinkFace(simulator=simulator, clock=clock, listen=listen).run()
 
