@@ -121,3 +121,27 @@ def test_the_thesis_mission_on_real_sitl(thesis_mission, mode):
                              options=SitlOptions(binary=Path(REAL_SITL), speedup=5.0))
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert outcome.landing_error_cm < 30.0
+
+
+def test_sitl_gusts_get_the_embedded_models_standard_deviation(thesis_mission):
+    """SIM_WIND_TURB is the standard deviation of SITL's horizontal gust. Its update, per physics step
+    (Aircraft::update_wind): speed = 0.98 * speed + 0.02 * (10 * SIM_WIND_TURB) * N(0, 1)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from preland_app.runtime.sitl import sim_params
+    from preland_app.sim.environment import dryden_scales
+
+    wind = replace(thesis_mission.environment.wind, speed_m_s=3.0, turbulence_w20_m_s=5.0, direction_from_deg=250.0)
+    gusty = replace(thesis_mission, environment=replace(thesis_mission.environment, wind=wind))
+    params = sim_params(gusty, seed=1)
+    assert params["SIM_WIND_SPD"] == 3.0 and params["SIM_WIND_DIR"] == 250.0
+    rng = np.random.default_rng(7)
+    speed, samples = 0.0, np.empty(200_000)
+    for i, draw in enumerate(rng.standard_normal(samples.size)):
+        speed = 0.98 * speed + 0.02 * (10.0 * params["SIM_WIND_TURB"]) * draw
+        samples[i] = speed
+    _, _, sigma_u_m_s, _ = dryden_scales(altitude_m=10.0, w20_m_s=5.0)
+    assert 0.9 < sigma_u_m_s < 1.1  # gusts of about 1 m/s at 10 m with W20 = 5 m/s
+    assert abs(samples[1000:].std() / sigma_u_m_s - 1.0) < 0.03

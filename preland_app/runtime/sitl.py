@@ -67,16 +67,25 @@ class SitlOptions:
 
 
 def sim_params(mission: MissionSpec, seed: int) -> dict[str, float]:
-    """The scenario's wind as ArduPilot SITL parameters (SIM_WIND_SPD in m/s, SIM_WIND_DIR in deg,
-    SIM_WIND_TURB in m/s: the gusts' standard deviation along the wind)."""
+    """The scenario's wind as ArduPilot SITL parameters: SIM_WIND_SPD (m/s), SIM_WIND_DIR (deg) and
+    SIM_WIND_TURB (m/s).
+
+    SITL's turbulence is a horizontal gust whose standard deviation is SIM_WIND_TURB (its IIR filter,
+    coefficient 0.98, is scaled to match), at any height; preland passes the embedded model's horizontal
+    gust standard deviation (Dryden sigma_u) at 10 m, the thesis' flight height. The two spectra differ:
+    SITL's gust is far whiter and changes direction every step.
+    """
     import numpy as np
+
+    from ..sim.environment import dryden_scales
 
     wind = mission.environment.wind
     direction = wind.direction_from_deg
     if direction is None:
         direction = float(np.random.default_rng(seed).uniform(0.0, 360.0))
+    _, _, sigma_u_m_s, _ = dryden_scales(altitude_m=10.0, w20_m_s=wind.turbulence_w20_m_s)
     return {"SIM_WIND_SPD": wind.speed_m_s, "SIM_WIND_DIR": direction,
-            "SIM_WIND_TURB": 0.1 * wind.turbulence_w20_m_s}
+            "SIM_WIND_TURB": round(sigma_u_m_s, 3)}
 
 
 def _free_udp_port() -> int:
