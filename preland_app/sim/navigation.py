@@ -67,7 +67,7 @@ class NavigationModel:
         self.elapsed_s = 0.0
 
     def step(self, *, dt_s: float, north_m: float, east_m: float, down_m: float,
-             velocity_ned_m_s: tuple[float, float, float], tilt_cos: float, yaw_rad: float = 0.0) -> NavEstimate:
+             velocity_ned_m_s: tuple[float, float, float], tilt_cos: float, yaw_rad: float) -> NavEstimate:
         """Advance error processes by `dt_s` and return the estimate of the given true state.
 
         `yaw_rad` (true heading, NED) turns the attitude error's gravity leak from body to NED axes.
