@@ -15,7 +15,7 @@ import typer
 
 from . import __version__
 from .errors import PrelandError
-from .landing.registry import land_mode_names
+from .landing.registry import LAND_MODES
 
 app = typer.Typer(
     name="preland",
@@ -98,7 +98,9 @@ def _parse_faults(values: list[str]) -> dict[str, str]:
 def fly(
     mission_file: Path = typer.Argument(..., metavar="MISSION", help="Mission YAML file (see missions/)."),
     land: Optional[str] = typer.Option(None, "--land", metavar="MODE",
-                                       help=f"Land mode, overriding the mission's: {', '.join(land_mode_names())}."),
+                                       help=f"Land mode, overriding the mission's: {', '.join(LAND_MODES)}, an "
+                                            "installed plugin's name (preland modes), or an import path "
+                                            "package.module:ClassName (its folder on PYTHONPATH)."),
     sensor: Optional[str] = typer.Option(None, "--sensor", metavar="SENSOR",
                                          help="Precision sensor of the cautious mode: irlock, marker or fused."),
     fault: list[str] = typer.Option([], "--fault", metavar="SENSOR=FAULT",
@@ -120,8 +122,9 @@ def fly(
                                        help="Fly on a fresh ArduPilot SITL process (arducopter binary; "
                                             "default $PRELAND_SITL_BINARY when --sitl is given empty)."),
     sitl_speedup: float = typer.Option(10.0, "--sitl-speedup", help="SITL --speedup."),
-    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="ArduPilot parameter defaults files "
-                                             "(e.g. copter.parm), repeatable."),
+    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="More ArduPilot parameter defaults "
+                                             "files, repeatable, applied after the copter defaults (copter.parm "
+                                             "of the binary's ArduPilot tree, else preland's own)."),
     tlog: Optional[Path] = typer.Option(None, "--tlog", help="With --connect or --sitl: write a MAVLink "
                                         "telemetry log (.tlog) of the trial."),
     camera_source: Optional[str] = typer.Option(None, "--camera", metavar="SRC",
@@ -138,7 +141,7 @@ def fly(
     campaign_name: Optional[str] = typer.Option(None, "--campaign", help="With --record-to: the campaign."),
     scenario_label: Optional[str] = typer.Option(None, "--scenario", help="With --record-to: the scenario."),
     fault_listen: Optional[str] = typer.Option(None, "--fault-listen", metavar="URL",
-                                               help="With --connect: take fault commands (preland fault send) "
+                                               help="With --connect or --sitl: take fault commands (preland fault send) "
                                                     "on this UDP address, e.g. udp://127.0.0.1:14560."),
 ) -> None:
     """Fly a mission once (on the embedded simulator, or over MAVLink) and print its outcome."""
@@ -150,8 +153,6 @@ def fly(
         mission = load_mission(mission_file)
     except PrelandError as error:
         raise fail(str(error)) from None
-    if land is not None and land not in land_mode_names():
-        raise fail(f"--land: unknown land mode {land!r} (expected one of: {', '.join(land_mode_names())})")
     if takeoff_altitude_m is not None and not 0.0 < takeoff_altitude_m <= 120.0:
         raise fail(f"--takeoff-altitude-m: must be > 0 and <= 120 m, got {takeoff_altitude_m:g}")
     if seed < 0:
@@ -162,7 +163,9 @@ def fly(
     try:
         request.resolved_mission()
     except SpecValueError as error:
-        option = {"sensor": "--sensor", "mode": "--land"}.get(error.field, "--fault")
+        option = {"sensor": "--sensor", "mode": "--land"}.get(error.field.split(".")[0], "--fault")
+        if error.field.startswith("params"):  # a plugin's options: the mission's land.params do not fit it
+            raise fail(f"--land {land}: land.{error.field}: {error.problem}") from None
         raise fail(f"{option}: {error.problem}") from None
 
     if sitl is not None:
@@ -173,7 +176,7 @@ def fly(
         except PrelandError as error:  # a missing binary is bad input, as for `campaign run --sitl`
             raise fail(f"--sitl: {error}") from None
         options = SitlOptions(binary=binary, speedup=sitl_speedup, defaults=tuple(sitl_defaults),
-                              tlog_dir=tlog.parent if tlog else None)
+                              tlog_dir=tlog.parent if tlog else None, fault_listen=fault_listen)
         try:
             outcome = run_sitl_trial(request, options=options, tlog_name=tlog.name if tlog else None)
         except PrelandError as error:
@@ -294,8 +297,9 @@ def campaign_run(
                                        help="Run each trial on a fresh ArduPilot SITL process (arducopter binary, "
                                             "or $PRELAND_SITL_BINARY when given empty)."),
     sitl_speedup: float = typer.Option(10.0, "--sitl-speedup", help="SITL --speedup."),
-    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="ArduPilot parameter defaults files "
-                                             "(e.g. copter.parm), repeatable."),
+    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="More ArduPilot parameter defaults "
+                                             "files, repeatable, applied after the copter defaults (copter.parm "
+                                             "of the binary's ArduPilot tree, else preland's own)."),
     tlog_dir: Optional[Path] = typer.Option(None, "--tlog-dir", help="With --sitl: one MAVLink telemetry log "
                                             "(.tlog) per trial in this folder."),
 ) -> None:
@@ -441,17 +445,23 @@ def sim_serve(
     seed: int = typer.Option(1, "--seed", help="Simulator seed (wind, GPS error, noise)."),
     mission_file: Optional[Path] = typer.Option(None, "--mission",
                                                 help="Take the environment and parameters from this mission."),
+    param_values: list[str] = typer.Option([], "--param", metavar="NAME=VALUE",
+                                           help="Set an ArduPilot parameter at start (repeatable; after the "
+                                                "mission's), as a defaults file does: e.g. --param PLND_ENABLED=1 "
+                                                "--param PLND_TYPE=1 for the precision land modes."),
 ) -> None:
     """Serve the embedded simulator over MAVLink, behaving like ArduCopter (Ctrl-C stops it)."""
     import asyncio
+    import math
 
     from .clock_scaled import ScaledWallClock
     from .sim.mavlink_face import MavlinkFace
+    from .sim.params import ARDUCOPTER_PARAMS, ParameterTable
     from .sim.simulator import Simulator
 
     if not 0.1 <= speedup <= 1000:
         raise fail(f"--speedup: must be within 0.1..1000, got {speedup:g}")
-    environment, params, yaw = None, None, 0.0
+    environment, params, yaw = None, {}, 0.0
     if mission_file is not None:
         from .config.mission import load_mission
 
@@ -460,6 +470,26 @@ def sim_serve(
         except PrelandError as error:
             raise fail(str(error)) from None
         environment, params, yaw = mission.environment, dict(mission.params), mission.initial_yaw_deg
+    check = ParameterTable()
+    for text in param_values:
+        name, sep, value_text = text.partition("=")
+        name = name.strip().upper()
+        info = ARDUCOPTER_PARAMS.get(name)
+        if not sep or not name:
+            raise fail(f"--param {text!r}: expected NAME=VALUE, e.g. PLND_ENABLED=1")
+        if info is None or not info.ardupilot:
+            raise fail(f"--param {text!r}: {name} is not an ArduCopter parameter the simulator models")
+        try:
+            value = float(value_text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise fail(f"--param {text!r}: {value_text.strip()!r} is not a number")
+        try:
+            check.set(name, value)
+        except ValueError as error:
+            raise fail(f"--param {text!r}: {error}") from None
+        params[name] = value
 
     async def main() -> None:
         simulator = Simulator(seed=seed, environment=environment, params=params, initial_yaw_deg=yaw)
@@ -638,7 +668,9 @@ def trial_record(
     if outcome not in {o.value for o in Outcome}:
         raise fail(f"--outcome: unknown outcome {outcome!r} (expected one of: "
                    f"{', '.join(o.value for o in Outcome)})")
-    if land_mode is not None and land_mode not in land_mode_names():
+    from .landing.registry import is_land_mode_name
+
+    if land_mode is not None and not is_land_mode_name(land_mode):
         raise fail(f"--land: unknown land mode {land_mode!r}")
     store = _open_store(db, must_exist=False)
     try:
@@ -660,14 +692,31 @@ def trial_record(
     typer.echo(f"recorded field trial {index} of {campaign} / {scenario}: {error_cm:g} cm")
 
 
+def _columns(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
+    """Rows as text columns, each as wide as its widest cell (the last one left ragged)."""
+    widths = [max(len(row[i]) for row in (header, *rows)) for i in range(len(header) - 1)]
+    return "\n".join("  ".join([*(cell.ljust(w) for cell, w in zip(row, widths)), row[-1]]).rstrip()
+                     for row in (header, *rows))
+
+
 @app.command("modes")
 def modes() -> None:
-    """List the land modes this version can fly."""
-    from .landing.registry import MODE_DESCRIPTIONS, create_land_strategy
+    """List the land modes this version can fly: built-in ones and installed plugins (entry point group
+    preland.land_modes). Any import path package.module:ClassName flies too."""
+    from .landing.registry import catalog
 
-    for name in land_mode_names():
-        strategy = create_land_strategy(name)
-        typer.echo(f"{name:<10} scored from the {strategy.scoring_reference.value:<8} {MODE_DESCRIPTIONS[name]}")
+    rows = [(row.name, row.origin, row.scored_from or "-", row.sensor or "-", row.description) for row in catalog()]
+    typer.echo(_columns(("mode", "from", "scored from", "sensor", "description"), rows))
+
+
+@app.command("schema")
+def schema(kind: str = typer.Argument(..., metavar="mission|campaign|pad", help="Which file's schema.")) -> None:
+    """Print the JSON Schema of mission, campaign or pad files (for editors: yaml-language-server)."""
+    from .config.schema import SCHEMA_KINDS, schema_text
+
+    if kind not in SCHEMA_KINDS:
+        raise fail(f"schema: unknown kind {kind!r} (expected one of: {', '.join(SCHEMA_KINDS)})")
+    typer.echo(schema_text(kind), nl=False)
 
 
 def main() -> None:

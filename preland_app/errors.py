@@ -85,3 +85,8 @@ class VehicleCrashed(VehicleError):
 
 class MissionAborted(PrelandError):
     """The mission stopped on purpose before it finished (for example a disarm in flight)."""
+
+
+class LandModeFailed(PrelandError):
+    """The land mode raised an exception of its own (not a vehicle error or a timeout): the message names
+    the land mode, the exception's type and message, and where it was raised."""

@@ -1,9 +1,11 @@
 """The async mission runner: the thesis' scripted mission, step by step, with timeouts.
 
 Steps: set parameters; wait for a position estimate; GUIDED and arm; take off;
-record the position; fly the path's waypoints; land with the land mode. Each
-step has its own timeout (vehicle seconds) and raises a typed error. A watcher
-task checks telemetry concurrently and stops the mission if the vehicle
+record the position; fly the path's waypoints; hand over to the land mode
+(event `land_handover`, the start of the landing time on every runtime). Each
+step has its own timeout (vehicle seconds) and raises a typed error; the land
+mode gets `timeouts.land_s`, and one still running then is cancelled. A
+watcher task checks telemetry concurrently and stops the mission if the vehicle
 disarms in flight. Whatever happens, the `MissionReport` holds what was
 reached; the caller turns it into a trial outcome.
 """
@@ -18,10 +20,12 @@ import numpy as np
 
 from .clock import wait_until
 from .config.mission import MissionSpec
-from .errors import CommandDenied, MissionAborted
+from .errors import CommandDenied, LandModeFailed, MissionAborted, PrelandError, WaitTimeout
 from .field.takeover import GuardedVehicle, PilotTakeover
 from .events import EventLog
 from .landing.base import LandingContext, LandingReport, LandStrategy
+from .landing.boundary import SensorFaults, as_sensor_view
+from .landing.plugins import where
 from .sensing.suite import SensorSuite
 from .vehicle.protocol import Vehicle
 from .vehicle.types import FlightMode, PositionNed, Telemetry
@@ -31,6 +35,8 @@ POLL_PERIOD_S = 0.1
 
 class GeofenceBreach(MissionAborted):
     """The vehicle left the geofence; the fence's action (LAND or RTL) has been commanded."""
+
+
 TAKEOFF_REACHED_FRACTION = 0.95  # as DroneKit's example scripts (the thesis' tool) judge a take-off done
 
 
@@ -40,7 +46,7 @@ class MissionReport:
 
     recorded_position_ned_m: PositionNed | None = None
     waypoints_reached: list[PositionNed] = field(default_factory=list)
-    land_command_time_s: float | None = None
+    handover_time_s: float | None = None  # vehicle clock, when the land mode took over
     disarmed_time_s: float | None = None
     landing: LandingReport | None = None
     completed: bool = False
@@ -69,6 +75,9 @@ class MissionRunner:
         self.events = events
         self.rng = rng
         self.sensors = sensors
+        # A plugin's readings carry the mission's faults; the built-in modes apply their own.
+        faults = spec.land.sensor_faults()
+        self.sensor_faults = SensorFaults(faults=faults, rng=rng.spawn(1)[0]) if faults else None
         self.takeoff_altitude_rel_m = (
             takeoff_altitude_rel_m if takeoff_altitude_rel_m is not None else spec.takeoff_altitude_rel_m()
         )
@@ -94,7 +103,10 @@ class MissionRunner:
             await asyncio.gather(steps, watcher, return_exceptions=True)
 
     async def _telemetry(self) -> Telemetry:
-        return await self.vehicle.telemetry()
+        telemetry = await self.vehicle.telemetry()
+        if self.sensor_faults is not None:
+            self.sensor_faults.observe(telemetry)
+        return telemetry
 
     async def _describe(self) -> str:
         t = await self._telemetry()
@@ -164,14 +176,58 @@ class MissionRunner:
                                                            recorded.east_m + east_rel, -target_alt))
 
         self._landing = True
-        context = LandingContext(vehicle=vehicle, clock=clock, events=self.events, rng=self.rng,
-                                 timeout_s=timeouts.land_s, poll_period_s=POLL_PERIOD_S, sensors=self.sensors)
-        report.landing = await self.strategy.land(context)
-        command = self.events.first("land_command")
-        report.land_command_time_s = command.time_s if command else None
+        report.landing = await self._land()
         report.disarmed_time_s = clock.now_s()
         report.completed = True
         return report
+
+    async def _land(self) -> LandingReport:
+        """Hand over to the land mode, with the mission's land timeout. Its own errors (not the vehicle's)
+        become LandModeFailed naming the exception."""
+        strategy, clock, timeout_s = self.strategy, self.clock, self.spec.timeouts.land_s
+        sensors = None
+        if self.sensors is not None:
+            sensors = as_sensor_view(self.sensors, clock=clock, faults=self.sensor_faults)
+        context = LandingContext(vehicle=self.guard, clock=clock, events=self.events, rng=self.rng,
+                                 timeout_s=timeout_s, poll_period_s=POLL_PERIOD_S, sensors=sensors)
+        self.report.handover_time_s = clock.now_s()
+        self.events.add("land_handover", f"hand-over to land mode {strategy.name}", land_mode=strategy.name)
+        if self.sensor_faults is not None:
+            self.sensor_faults.landing = True
+        # The land mode runs inline in this task (so it starts at the very moment of the hand-over); a
+        # watchdog on the vehicle clock cancels it at the land timeout.
+        task = asyncio.current_task()
+        expired: list[bool] = []
+
+        async def watchdog() -> None:
+            await clock.sleep(timeout_s)
+            expired.append(True)
+            task.cancel()
+
+        dog = asyncio.ensure_future(watchdog())
+        try:
+            result = await strategy.land(context)
+            if expired:  # it swallowed the cancellation
+                raise asyncio.CancelledError
+        except asyncio.CancelledError:
+            if not expired:
+                raise  # the mission was stopped (watcher, Ctrl-C)
+            task.uncancel()
+            raise WaitTimeout(operation="land", timeout_s=timeout_s,
+                              last_state=f"land mode {strategy.name} still running; {await self._describe()}") from None
+        except PrelandError:
+            raise  # the vehicle's errors and timeouts keep their meaning (timed_out, link_lost, ...)
+        except Exception as error:
+            raise LandModeFailed(f"land mode {strategy.name!r} raised {type(error).__name__}: {error}"
+                                 f"{where(error)}") from error
+        finally:
+            dog.cancel()
+        if not isinstance(result, LandingReport):
+            raise LandModeFailed(f"land mode {strategy.name!r} returned {type(result).__name__}, not a LandingReport")
+        if self.sensor_faults is not None:
+            for key, value in self.sensor_faults.details().items():
+                result.details.setdefault(key, value)
+        return result
 
     async def _arm(self) -> None:
         """Arm, retrying while the autopilot refuses (its checks may pass a moment later)."""

@@ -119,7 +119,7 @@ class TrialOutcome:
 
 def outcome_for_error(error: Exception) -> tuple[Outcome, str]:
     """How a trial that ended with `error` is recorded: its outcome and a readable message."""
-    from .errors import LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
+    from .errors import LandModeFailed, LinkLost, MissionAborted, PrelandError, VehicleCrashed, WaitTimeout
     from .field.takeover import PilotTakeover
 
     for kind, outcome in ((WaitTimeout, Outcome.TIMED_OUT), (MissionAborted, Outcome.ABORTED),
@@ -127,6 +127,8 @@ def outcome_for_error(error: Exception) -> tuple[Outcome, str]:
                           (PilotTakeover, Outcome.PILOT_TAKEOVER)):
         if isinstance(error, kind):
             return outcome, str(error)
+    if isinstance(error, LandModeFailed):  # already names the land mode and the exception
+        return Outcome.ERROR, str(error)
     if isinstance(error, PrelandError):
         return Outcome.ERROR, f"{type(error).__name__}: {error}"
     # A bug must still end as this trial's outcome, not kill a campaign.

@@ -40,7 +40,11 @@ def test_every_command_has_help():
 def test_modes_lists_every_land_mode_with_its_scoring_reference():
     result = CliRunner().invoke(app, ["modes"])
     assert result.exit_code == 0
-    lines = {line.split()[0]: line for line in result.stdout.splitlines()}
+    header, *rows = result.stdout.splitlines()
+    assert header.split() == ["mode", "from", "scored", "from", "sensor", "description"]
+    lines = {line.split()[0]: line.split() for line in rows}
     precision = ("irlock", "marker", "fused", "cautious", "paper_static", "paper_adaptive")
-    assert set(lines) == {"normal", *precision}
-    assert "takeoff" in lines["normal"] and all("pad" in lines[m] for m in precision)
+    assert {"normal", *precision} <= set(lines)  # and any plugin installed here
+    assert lines["normal"][1:4] == ["built-in", "takeoff", "GPS"]
+    assert all(lines[m][1:3] == ["built-in", "pad"] for m in precision)
+    assert lines["fused"][3] == "fused" and lines["paper_static"][3] == "marker"

@@ -12,6 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from preland_app.clock_scaled import ScaledWallClock
 from preland_app.sim.mavlink_face import MavlinkFace, MavlinkFaceError, parse_listen
+from preland_app.sim.params import ARDUPILOT_PARAM_NAMES
 from preland_app.sim.simulator import Simulator
 from preland_app.sim.spec import EnvironmentSpec, WindSpec
 
@@ -25,18 +26,19 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def serving(channels: int):
+def serving(channels: int, *, speedup: float = SPEEDUP, params: dict[str, float] | None = None):
     """A face on `channels` free localhost ports, run in a thread with its own event loop; yields one
     pymavlink client per port, the simulator and the face."""
     ports = [free_port() for _ in range(channels)]
-    simulator = Simulator(seed=3, environment=EnvironmentSpec(wind=WindSpec(speed_m_s=0.0, turbulence_w20_m_s=0.0)))
+    simulator = Simulator(seed=3, environment=EnvironmentSpec(wind=WindSpec(speed_m_s=0.0, turbulence_w20_m_s=0.0)),
+                          params=params)
     loop = asyncio.new_event_loop()
     face_box = {}
     started = threading.Event()
 
     def run():
         asyncio.set_event_loop(loop)
-        face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=SPEEDUP),
+        face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=speedup),
                            listen=[f"udp:127.0.0.1:{port}" for port in ports])
         face_box["face"] = face
         face_box["task"] = loop.create_task(face.run())
@@ -117,11 +119,13 @@ def test_param_protocol(served):
     wait_for(client, "HEARTBEAT")
     client.mav.param_request_read_send(1, 1, b"LAND_SPEED", -1)
     value = wait_for(client, "PARAM_VALUE", condition=lambda m: m.param_id == "LAND_SPEED")
-    assert value.param_value == 50.0 and value.param_count > 30
-    client.mav.param_set_send(1, 1, b"LAND_SPEED", 35.0, mavlink2.MAV_PARAM_TYPE_REAL32)
+    # LAND_SPEED is an AP_Int16 on ArduCopter; only ArduPilot's parameters are counted.
+    assert value.param_value == 50.0 and value.param_type == mavlink2.MAV_PARAM_TYPE_INT16
+    assert value.param_count == len(ARDUPILOT_PARAM_NAMES)
+    client.mav.param_set_send(1, 1, b"LAND_SPEED", 35.0, mavlink2.MAV_PARAM_TYPE_INT16)
     value = wait_for(client, "PARAM_VALUE", condition=lambda m: m.param_id == "LAND_SPEED")
     assert value.param_value == 35.0 and simulator.params.get("LAND_SPEED") == 35.0
-    client.mav.param_set_send(1, 1, b"LAND_SPEED", 9999.0, mavlink2.MAV_PARAM_TYPE_REAL32)
+    client.mav.param_set_send(1, 1, b"LAND_SPEED", 9999.0, mavlink2.MAV_PARAM_TYPE_INT16)
     value = wait_for(client, "PARAM_VALUE", condition=lambda m: m.param_id == "LAND_SPEED")
     assert value.param_value == 35.0  # out of range: refused, the value in force comes back
 

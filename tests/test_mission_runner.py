@@ -46,8 +46,8 @@ def test_mission_flies_steps_in_order(thesis_mission):
     assert [(g["north_m"], g["east_m"], g["down_m"]) for g in gotos] == [
         (-2.0, 0.0, -10.0), (-2.0, 2.0, -10.0), (0.0, 2.0, -10.0), (0.0, 0.0, -10.0)]
     assert [e.kind for e in events.events] == ["params", "armed", "takeoff", "recorded", "waypoint", "waypoint",
-                                               "waypoint", "waypoint", "land_command", "disarmed"]
-    assert report.land_command_time_s < report.disarmed_time_s
+                                               "waypoint", "waypoint", "land_handover", "land_command", "disarmed"]
+    assert report.handover_time_s == events.first("land_handover").time_s < report.disarmed_time_s
 
 
 def test_arm_is_retried_while_refused(thesis_mission):

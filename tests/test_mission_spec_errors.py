@@ -78,3 +78,21 @@ def test_thesis_mission_loads_with_the_sources_numbers():
     ]
     assert [abs(n) + abs(e) for n, e in legs] == [2.0, 2.0, 2.0, 2.0]
     assert mission.path.waypoints_rel_ned_m[-1] == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("content, problem", [
+    (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xd8", "not a UTF-8 text file (byte 0x89 at offset 0)"),
+    ("name: x\n".encode("utf-16"), "not a UTF-8 text file"),
+    (b"name: x\x00\x01\x02\n", "character #x0000 is not allowed in YAML text"),
+])
+def test_a_binary_mission_or_campaign_file_gives_one_line(tmp_path, content, problem):
+    path = tmp_path / "binary.yaml"
+    path.write_bytes(content)
+    runner = CliRunner()
+    for args in (["fly", str(path)], ["campaign", "run", str(path), "--db", str(tmp_path / "r.db")],
+                 ["sim", "serve", "--mission", str(path)]):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        message = result.stderr.strip()
+        assert len(message.splitlines()) == 1 and "Traceback" not in result.output, message
+        assert message.startswith(f"preland: error: {path}: ") and problem in message, message

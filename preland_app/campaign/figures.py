@@ -94,7 +94,7 @@ def trajectory_plot(store: ResultsStore, campaign: str, summaries: list[Scenario
     col = {name: i for i, name in enumerate(columns)}
     events = {e["kind"]: e["time_s"] for e in reversed(store.events(chosen["id"]))}
     recorded_s = events.get("recorded", 0.0)
-    land_s = events.get("land_command", math.inf)
+    land_s = events.get("land_handover", events.get("land_command", math.inf))  # stores before 0.2: land_command
     truth = "true_north_m" in col and rows and rows[0][col["true_north_m"]] is not None
     north, east, up = (("true_north_m", "true_east_m", "true_altitude_m") if truth
                        else ("est_north_m", "est_east_m", "est_altitude_rel_m"))

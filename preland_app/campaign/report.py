@@ -159,8 +159,8 @@ def table_rows(summaries: list[ScenarioSummary]) -> list[tuple[str, ...]]:
 def markdown_table(campaign: str, summaries: list[ScenarioSummary]) -> str:
     lines = [f"# Campaign `{campaign}`", "",
              "Simulated figures beside the published ones (where the campaign gives them). Errors are the "
-             "horizontal distance from the scoring reference at touchdown; times run from the land command to "
-             "touchdown.", "",
+             "horizontal distance from the scoring reference at touchdown; times run from the hand-over to the "
+             "land mode to touchdown.", "",
              "| " + " | ".join(TABLE_HEADER) + " |", "|" + "---|" * len(TABLE_HEADER)]
     for row in table_rows(summaries):
         lines.append("| " + " | ".join(row) + " |")

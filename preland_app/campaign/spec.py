@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config.loader import build, load_spec_file
-from ..config.mission import MissionSpec, load_mission
+from ..config.mission import FAULTS_SCHEMA, HASH_WHEN_SET, PARAMS_SCHEMA, MissionSpec, load_mission
 from ..errors import SpecError, SpecValueError, require
 from ..sim.spec import EnvironmentSpec
 
@@ -44,15 +44,17 @@ class ReferenceSpec:
 
 @dataclass(frozen=True)
 class ScenarioSpec:
-    """One scenario: a label, how it lands, what fails, from how high, in which environment."""
+    """One scenario: a label, how it lands (`land`: a land mode by name or import path; `land_params`: a
+    plugin's keyword options), what fails, from how high, in which environment."""
 
     label: str
     land: str
+    land_params: dict[str, Any] = field(default_factory=dict, metadata=HASH_WHEN_SET)
     sensor: str | None = None
-    faults: dict[str, str] = field(default_factory=dict)
+    faults: dict[str, str] = field(default_factory=dict, metadata=FAULTS_SCHEMA)
     initial_height_m: float | None = None
-    environment: dict[str, Any] = field(default_factory=dict)
-    params: dict[str, float] = field(default_factory=dict)
+    environment: dict[str, Any] = field(default_factory=dict, metadata={"schema_partial": EnvironmentSpec})
+    params: dict[str, float] = field(default_factory=dict, metadata=PARAMS_SCHEMA)
     trials: int | None = None
     reference: ReferenceSpec | None = None
 
@@ -115,9 +117,21 @@ def _deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any
     return merged
 
 
+def _hashed(value: Any, spec_field: dataclasses.Field) -> bool:
+    """Whether a field enters a spec's plain form: not `source_path`, and not a field added after 0.1 while
+    it keeps its default (HASH_WHEN_SET), so that stores made before it still resume."""
+    if spec_field.name == "source_path":
+        return False
+    if spec_field.metadata.get("hash") == "when-set":
+        default = (spec_field.default_factory() if spec_field.default_factory is not dataclasses.MISSING
+                   else spec_field.default)
+        return getattr(value, spec_field.name) != default
+    return True
+
+
 def _to_plain(value: Any) -> Any:
     if dataclasses.is_dataclass(value):
-        return {f.name: _to_plain(getattr(value, f.name)) for f in dataclasses.fields(value) if f.name != "source_path"}
+        return {f.name: _to_plain(getattr(value, f.name)) for f in dataclasses.fields(value) if _hashed(value, f)}
     if isinstance(value, (list, tuple)):
         return [_to_plain(v) for v in value]
     if isinstance(value, dict):
@@ -144,9 +158,12 @@ def resolve_scenarios(campaign: CampaignSpec, *, mission: MissionSpec | None = N
     for index, scenario in enumerate(campaign.scenarios):
         where = f"scenarios[{index}]"
         try:
-            flown = mission.with_land(mode=scenario.land, sensor=scenario.sensor, faults=dict(scenario.faults))
+            flown = mission.with_land(mode=scenario.land, sensor=scenario.sensor, faults=dict(scenario.faults),
+                                      params=dict(scenario.land_params) if scenario.land_params else None)
         except SpecValueError as error:
-            field_name = {"mode": "land"}.get(error.field, error.field)
+            field_name = "land" if error.field == "mode" else error.field
+            if field_name == "params" or field_name.startswith("params."):
+                field_name = "land_" + field_name
             raise SpecError(path=path, field=f"{where}.{field_name}", problem=error.problem) from None
         if scenario.environment:
             merged = _deep_merge(_to_plain(flown.environment), scenario.environment)

@@ -32,17 +32,29 @@ def read_yaml_mapping(path: str | Path) -> dict[str, Any]:
         raise SpecError(path=path_text, field="", problem="file not found") from None
     except OSError as error:
         raise SpecError(path=path_text, field="", problem=f"cannot read file ({error.strerror})") from None
+    except UnicodeDecodeError as error:
+        raise SpecError(path=path_text, field="", problem=not_utf8_problem(error)) from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "somewhere"
         problem = getattr(error, "problem", None) or str(error).splitlines()[0]
+        if isinstance(error, yaml.reader.ReaderError):  # a control character: most likely a binary file
+            where = f"offset {error.position}"
+            code = error.character if isinstance(error.character, int) else ord(error.character)
+            problem = f"character #x{code:04x} is not allowed in YAML text (is it a binary file?)"
         raise SpecError(path=path_text, field="", problem=f"malformed YAML at {where}: {problem}") from None
     if not isinstance(data, dict):
         kind = "empty" if data is None else type(data).__name__
         raise SpecError(path=path_text, field="", problem=f"expected a mapping at the top level, got {kind}")
     return data
+
+
+def not_utf8_problem(error: UnicodeDecodeError) -> str:
+    """The one-line problem for a file that is not UTF-8 text (a binary file, another encoding)."""
+    byte = error.object[error.start:error.start + 1]
+    return f"not a UTF-8 text file (byte 0x{byte.hex()} at offset {error.start}): is it a binary file?"
 
 
 def _join(prefix: str, name: str | int) -> str:
@@ -90,6 +102,11 @@ def convert(value: Any, tp: Any, *, path: str, field: str) -> Any:
         raise errors[0]
     if tp is Any:
         return value
+    if origin is typing.Literal:
+        choices = get_args(tp)
+        if value in choices and any(type(value) is type(choice) for choice in choices):
+            return value
+        raise SpecError(path=path, field=field, problem=f"expected one of {', '.join(map(repr, choices))}, got {value!r}")
     if tp is bool:
         if isinstance(value, bool):
             return value

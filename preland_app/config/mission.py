@@ -12,13 +12,16 @@ import math
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from ..errors import SpecError, SpecValueError, require
 from ..field.preflight import PreflightSpec
 from ..landing.base import LandStrategy
 from ..landing.cautious import CautiousSpec
 from ..landing.paper import PaperSpec
-from ..landing.registry import LAND_MODES, PRECISION_SENSORS, create_land_strategy, land_mode_names, sensor_for
+from ..landing.plugins import LandModeError, precision_sensor_of
+from ..landing.registry import LAND_MODES, PRECISION_SENSORS, create_land_strategy, find_land_mode, is_land_mode_name, \
+    land_mode_names
 from ..sensing.faults import SENSORS as FAULT_SENSORS
 from ..sensing.faults import FaultSpec, FaultSyntaxError
 from ..sim.params import ARDUCOPTER_PARAMS
@@ -58,8 +61,9 @@ class TakeoffSpec:
         require(0.0 < self.altitude_rel_m <= _MAX_ALTITUDE_M, "altitude_rel_m",
                 f"must be > 0 and <= {_MAX_ALTITUDE_M:g} m, got {self.altitude_rel_m:g}")
         for mode, altitude in self.altitude_by_land_mode_rel_m.items():
-            require(mode in LAND_MODES or mode in PRECISION_SENSORS, f"altitude_by_land_mode_rel_m.{mode}",
-                    f"unknown land mode or sensor (expected one of: {', '.join(land_mode_names())})")
+            require(mode in PRECISION_SENSORS or is_land_mode_name(mode), f"altitude_by_land_mode_rel_m.{mode}",
+                    f"unknown land mode or sensor (expected one of: {', '.join(land_mode_names())}, "
+                    "or an import path package.module:ClassName)")
             require(0.0 < altitude <= _MAX_ALTITUDE_M, f"altitude_by_land_mode_rel_m.{mode}",
                     f"must be > 0 and <= {_MAX_ALTITUDE_M:g} m, got {altitude:g}")
 
@@ -95,52 +99,85 @@ class PathSpec:
         require(0.05 <= self.settle_speed_m_s <= 20.0, "settle_speed_m_s", "must be within 0.05..20 m/s")
 
 
+# Fields added after 0.1 leave a spec's hash as it was while they keep their default, so stored campaigns
+# still resume (campaign/spec.py: spec_hash).
+HASH_WHEN_SET = {"hash": "when-set"}
+# What the JSON Schema (config/schema.py) says beyond the types: the keys these mappings take.
+FAULTS_SCHEMA = {"schema": {"propertyNames": {"enum": list(FAULT_SENSORS)}}}
+PARAMS_SCHEMA = {"schema": {"propertyNames": {"enum": sorted(ARDUCOPTER_PARAMS)}}}
+
+
 @dataclass(frozen=True)
 class LandSpec:
-    """How to land. `mode`: normal, irlock, marker, fused or cautious; `sensor`: the precision sensor of
-    the cautious mode (irlock, marker or fused; default marker); `faults`: per sensor (irlock, marker),
-    in the fault syntax (`random:0.75`, `below:3:first-attempt`...); `cautious`: the retry parameters;
-    `paper`: the paper algorithms' parameters; `normal_scored_from`: what a `normal` landing is scored
-    against, `takeoff` (the thesis) or `pad` (the paper, whose GPS landing aims at the marker)."""
+    """How to land. `mode`: a land mode by name (`preland modes`: normal, irlock, marker, fused, cautious,
+    paper_static, paper_adaptive, or an installed plugin's name) or by import path
+    (`package.module:ClassName`); `params`: a plugin's keyword options, checked against its class when the
+    file loads; `sensor`: the precision sensor of the cautious mode (irlock, marker or fused; default
+    marker); `faults`: per sensor (irlock, marker), in the fault syntax (`random:0.75`,
+    `below:3:first-attempt`...); `cautious`: the retry parameters; `paper`: the paper algorithms'
+    parameters; `normal_scored_from`: what a `normal` landing is scored against, `takeoff` (the thesis)
+    or `pad` (the paper, whose GPS landing aims at the marker)."""
 
-    mode: str = "normal"
+    mode: str = field(default="normal", metadata={"schema": {"examples": list(LAND_MODES)}})
     sensor: str | None = None
-    faults: dict[str, str] = field(default_factory=dict)
+    faults: dict[str, str] = field(default_factory=dict, metadata=FAULTS_SCHEMA)
     cautious: CautiousSpec = field(default_factory=CautiousSpec)
     paper: PaperSpec = field(default_factory=PaperSpec)
     normal_scored_from: str = "takeoff"
+    params: dict[str, Any] = field(default_factory=dict, metadata=HASH_WHEN_SET)
 
     def __post_init__(self) -> None:
-        require(self.mode in LAND_MODES, "mode",
-                f"unknown land mode {self.mode!r} (expected one of: {', '.join(land_mode_names())})")
+        try:
+            builtin = find_land_mode(self.mode).builtin
+        except LandModeError as error:
+            raise SpecValueError("mode", str(error)) from None
         if self.sensor is not None:
             require(self.mode == "cautious", "sensor", "only the cautious mode takes a sensor (the others are one)")
             require(self.sensor in PRECISION_SENSORS, "sensor",
                     f"unknown sensor {self.sensor!r} (expected one of: {', '.join(PRECISION_SENSORS)})")
         require(self.normal_scored_from in ("takeoff", "pad"), "normal_scored_from", "must be takeoff or pad")
-        used = {None: (), "irlock": ("irlock",), "marker": ("marker",), "fused": ("irlock", "marker")}[
-            sensor_for(self.mode, self.sensor)]
         for sensor, text in self.faults.items():
             require(sensor in FAULT_SENSORS, f"faults.{sensor}",
                     f"unknown sensor (expected one of: {', '.join(FAULT_SENSORS)})")
-            require(sensor in used, f"faults.{sensor}",
-                    f"land mode {self.mode!r} does not use the {sensor} sensor")
             try:
                 FaultSpec.parse(text)
             except FaultSyntaxError as error:
                 raise SpecValueError(f"faults.{sensor}", str(error)) from None
+        # Make the strategy once now: a plugin that cannot be imported, or refuses its options, is reported
+        # when the file loads. What it uses decides its sensor and which faults apply.
+        sensor = precision_sensor_of(self._make_strategy())
+        used = {None: (), "irlock": ("irlock",), "marker": ("marker",), "fused": ("irlock", "marker")}[sensor]
+        for sensor_name in self.faults:
+            require(sensor_name in used, f"faults.{sensor_name}",
+                    f"land mode {self.mode!r} does not use the {sensor_name} sensor")
+        object.__setattr__(self, "_precision_sensor", sensor)
+        object.__setattr__(self, "_builtin", builtin)
 
     @property
     def precision_sensor(self) -> str | None:
-        return sensor_for(self.mode, self.sensor)
+        """The sensor this landing uses: irlock, marker, fused, or None (GPS only)."""
+        return self._precision_sensor
 
     def fault_specs(self) -> dict[str, FaultSpec]:
         return {sensor: FaultSpec.parse(text) for sensor, text in self.faults.items()}
 
+    def sensor_faults(self) -> dict[str, FaultSpec]:
+        """The faults the sensor suite applies to the readings it delivers: a plugin's (the built-in modes
+        apply their own, so none for them)."""
+        return {} if self._builtin else self.fault_specs()
+
+    def _make_strategy(self) -> LandStrategy:
+        try:
+            return create_land_strategy(self.mode, sensor=self.sensor, faults=self.fault_specs(),
+                                        cautious=self.cautious if self.mode == "cautious" else None,
+                                        paper=self.paper, normal_reference=self.normal_scored_from,
+                                        params=self.params)
+        except LandModeError as error:
+            raise SpecValueError("mode", str(error)) from None
+
     def strategy(self) -> LandStrategy:
-        return create_land_strategy(self.mode, sensor=self.sensor, faults=self.fault_specs(),
-                                    cautious=self.cautious if self.mode == "cautious" else None,
-                                    paper=self.paper, normal_reference=self.normal_scored_from)
+        """A fresh strategy for one trial."""
+        return self._make_strategy()
 
 
 @dataclass(frozen=True)
@@ -188,7 +225,7 @@ class MissionSpec:
     sensors: SensorsSpec = field(default_factory=SensorsSpec)
     geofence: GeofenceSpec | None = None
     preflight: PreflightSpec = field(default_factory=PreflightSpec)
-    params: dict[str, float] = field(default_factory=dict)
+    params: dict[str, float] = field(default_factory=dict, metadata=PARAMS_SCHEMA)
     initial_yaw_deg: float = 0.0
     source_path: str = field(default="", compare=False)
 
@@ -214,12 +251,14 @@ class MissionSpec:
         return load_pad(str(path if path.is_absolute() else self.base_dir / path))
 
     def with_land(self, *, mode: str | None = None, sensor: str | None = None,
-                  faults: dict[str, str] | None = None) -> "MissionSpec":
-        """This mission with another land mode, sensor or faults (validated like the file's)."""
+                  faults: dict[str, str] | None = None, params: dict[str, Any] | None = None) -> "MissionSpec":
+        """This mission with another land mode, sensor, faults or plugin options (validated like the file's).
+        Another mode drops the mission's `land.params` (they were the other mode's) unless `params` is given."""
         land = self.land
         new_mode = mode or land.mode
         new_sensor = sensor if sensor is not None else (land.sensor if new_mode == "cautious" else None)
-        return replace(self, land=replace(land, mode=new_mode, sensor=new_sensor,
+        new_params = params if params is not None else (dict(land.params) if new_mode == land.mode else {})
+        return replace(self, land=replace(land, mode=new_mode, sensor=new_sensor, params=new_params,
                                           faults=faults if faults is not None else dict(land.faults)))
 
 

@@ -16,6 +16,8 @@ from ..vehicle.types import FlightMode, Telemetry
 
 _COMMANDS = {"arm", "disarm", "takeoff", "goto_ned", "goto_global", "set_velocity_ned", "set_velocity_body", "hold",
              "set_mode", "set_param", "send_landing_target"}
+# The Vehicle protocol's other members; nothing else of the backend passes through the guard.
+_QUERIES = {"connect", "close", "get_param", "telemetry"}
 
 
 class PilotTakeover(PrelandError):
@@ -62,6 +64,8 @@ class GuardedVehicle:
             raise PilotTakeover(self.taken_over)
 
     def __getattr__(self, name: str) -> Any:
+        if name not in _COMMANDS and name not in _QUERIES:
+            raise AttributeError(f"{type(self).__name__} has no {name!r}: it passes on the Vehicle protocol only")
         attribute = getattr(self._vehicle, name)
         if name in _COMMANDS and callable(attribute):
             async def guarded(*args, **kwargs):

@@ -6,8 +6,9 @@ the trial's faults say, and sends every remaining new value as a LANDING_TARGET
 through the Vehicle protocol. The autopilot's own precision landing
 (PLND_ENABLED=1, PLND_TYPE=1: companion) steers the LAND descent onto the
 target. The plain modes set PLND_STRICT=0 (the thesis' default operation: when
-the target is lost the descent goes on); `cautious` sets the retry parameters
-of its `CautiousSpec`.
+the target is lost the descent goes on); `cautious` sets ArduPilot's retry
+parameters of its `CautiousSpec` and runs the thesis' cautious sequence on the
+companion (`cautious_retry.py`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import asyncio
 from collections import Counter
 
 from ..clock import wait_until
-from ..errors import CommandDenied, PrelandError
+from ..errors import PrelandError
 from ..sensing.faults import FaultCommand, FaultInjector, FaultSpec
 from ..sensing.fusion import FusedSensor
 from ..sensing.marker import choose_smallest, reading_from_detection
@@ -24,6 +25,7 @@ from ..sensing.readings import TargetReading
 from ..vehicle.types import FlightMode
 from .base import LandingContext, LandingReport, ScoringReference
 from .cautious import CautiousSpec
+from .cautious_retry import CompanionRetry
 
 SENSORS = ("irlock", "marker", "fused")
 ATTEMPT_CLIMB_M = 0.5  # a climb this large during LAND means the autopilot started another attempt
@@ -80,6 +82,13 @@ class PrecisionLanding:
         self.attempts = AttemptTracker()
         self._fused: FusedSensor | None = None
         self._height_m: float | None = None
+        self._retry: CompanionRetry | None = None
+
+    @property
+    def attempt(self) -> int:
+        """The landing attempt now under way (1 first): the companion's count for the cautious mode, else
+        counted from the autopilot's climbs in LAND."""
+        return self._retry.attempt if self._retry is not None else self.attempts.attempt
 
     @property
     def uses_irlock(self) -> bool:
@@ -109,12 +118,8 @@ class PrecisionLanding:
         for name, value in params.items():
             await vehicle.set_param(name, value)
         if self.cautious is not None:
-            for name, value in self.cautious.embedded_params().items():
-                try:
-                    await vehicle.set_param(name, value)
-                except CommandDenied:
-                    # ArduPilot has no such parameter: its own retry behaviour applies.
-                    context.events.add("param_skipped", f"{name} not supported by this autopilot")
+            self._retry = CompanionRetry(spec=self.cautious, vehicle=vehicle, clock=context.clock,
+                                         events=context.events)
 
     async def land(self, context: LandingContext) -> LandingReport:
         vehicle, clock = context.vehicle, context.clock
@@ -151,7 +156,7 @@ class PrecisionLanding:
 
             async def describe() -> str:
                 t = await vehicle.telemetry()
-                return f"altitude {t.altitude_rel_m:.1f} m, {t.landed_state.name}, attempt {self.attempts.attempt}"
+                return f"altitude {t.altitude_rel_m:.1f} m, {t.landed_state.name}, attempt {self.attempt}"
 
             await wait_until(disarmed, clock=clock, timeout_s=context.timeout_s, operation="land",
                              poll_period_s=context.poll_period_s, describe=describe)
@@ -163,7 +168,10 @@ class PrecisionLanding:
         return LandingReport(details=self._details())
 
     def _details(self) -> dict:
-        details: dict = {"sensor": self.sensor, "attempts": self.attempts.attempt}
+        details: dict = {"sensor": self.sensor, "attempts": self.attempt}
+        if self._retry is not None:
+            details["cautious_pauses"] = self._retry.pauses
+            details["cautious_retries"] = self._retry.retries
         details.update({key: value for key, value in sorted(self.counts.items())})
         for sensor, injector in sorted(self.injectors.items()):
             details[f"{sensor}_fault"] = str(injector.spec)
@@ -184,7 +192,9 @@ class PrecisionLanding:
         while True:
             t = await context.vehicle.telemetry()
             self._height_m = t.height_above_ground_m
-            if t.mode is FlightMode.LAND and self.attempts.update(t.altitude_rel_m):
+            if self._retry is not None:
+                await self._retry.step(t)
+            elif t.mode is FlightMode.LAND and self.attempts.update(t.altitude_rel_m):
                 context.events.add("attempt", f"landing attempt {self.attempts.attempt} started",
                                    attempt=self.attempts.attempt, altitude_rel_m=round(t.altitude_rel_m, 2))
             await context.clock.sleep(TELEMETRY_PERIOD_S)
@@ -192,13 +202,18 @@ class PrecisionLanding:
     async def _deliver(self, context: LandingContext, reading: TargetReading) -> None:
         """A new sensor value: through the fault injector, then to the fused sensor or the autopilot."""
         injector = self.injectors.get(reading.sensor)
-        if injector is not None and not injector.admit(height_m=self._height_m, attempt=self.attempts.attempt):
+        if injector is not None and not injector.admit(height_m=self._height_m, attempt=self.attempt):
             return
         if self._fused is not None:
             self._fused.offer(reading)
             return
         await context.vehicle.send_landing_target(reading.to_landing_target())
+        self._sent()
+
+    def _sent(self) -> None:
         self.counts["landing_targets_sent"] += 1
+        if self._retry is not None:
+            self._retry.note_target()
 
     async def _irlock_loop(self, context: LandingContext) -> None:
         source = context.sensors.irlock
@@ -231,4 +246,4 @@ class PrecisionLanding:
             value = self._fused.poll(context.clock.now_s())
             if value is not None and value.is_new:
                 await context.vehicle.send_landing_target(value.reading.to_landing_target())
-                self.counts["landing_targets_sent"] += 1
+                self._sent()

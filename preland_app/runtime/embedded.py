@@ -6,6 +6,7 @@ import asyncio
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from ..clock import LoopClock, run_virtual
 from ..config.mission import MissionSpec
@@ -27,8 +28,8 @@ from .recorder import TrajectoryRecorder
 
 @dataclass(frozen=True, kw_only=True)
 class TrialRequest:
-    """One trial: a mission, a seed, and optional overrides of its land mode, sensor, faults
-    (sensor -> fault syntax) and take-off altitude."""
+    """One trial: a mission, a seed, and optional overrides of its land mode (a name or an import path),
+    the plugin's options (`land_params`), sensor, faults (sensor -> fault syntax) and take-off altitude."""
 
     mission: MissionSpec
     seed: int
@@ -37,11 +38,13 @@ class TrialRequest:
     faults: dict[str, str] | None = None
     takeoff_altitude_rel_m: float | None = None
     record_trajectory: bool = True
+    land_params: dict[str, Any] | None = None
 
     def resolved_mission(self) -> MissionSpec:
-        if self.land_mode is None and self.sensor is None and self.faults is None:
+        if self.land_mode is None and self.sensor is None and self.faults is None and self.land_params is None:
             return self.mission
-        return self.mission.with_land(mode=self.land_mode, sensor=self.sensor, faults=self.faults)
+        return self.mission.with_land(mode=self.land_mode, sensor=self.sensor, faults=self.faults,
+                                      params=self.land_params)
 
 
 def run_trial(request: TrialRequest) -> TrialOutcome:
@@ -132,8 +135,8 @@ def _score(*, request: TrialRequest, mission: MissionSpec, simulator: Simulator,
     if final is not None and outcome in (Outcome.LANDED, Outcome.CRASHED):
         score = score_touchdown(touchdown_ned_m=(final.north_m, final.east_m), reference_ned_m=reference)
     landing_time_s = None
-    if final is not None and report.land_command_time_s is not None:
-        landing_time_s = final.time_s - report.land_command_time_s
+    if final is not None and report.handover_time_s is not None:
+        landing_time_s = final.time_s - report.handover_time_s
     armed = events.first("armed")
     flight_time_s = None
     if armed is not None and report.disarmed_time_s is not None:

@@ -11,6 +11,8 @@ landing error: the operator measures it.
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Awaitable, Callable, Sequence
+from typing import TypeVar
 
 from ..errors import PrelandError
 from ..events import EventLog
@@ -31,6 +33,7 @@ from .embedded import TrialRequest, build_sensor_suite
 from .recorder import TrajectoryRecorder
 
 ON_GROUND_M = 0.05
+T = TypeVar("T")
 
 
 class SimStateTruth:
@@ -63,22 +66,32 @@ class SimStateTruth:
 async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, link_timeout_s: float = 5.0,
                       tlog_path: str | None = None, fault_listen: str | None = None, preflight: bool = False,
                       camera_source: str | None = None, frame_source=None, detection_log: str | None = None,
-                      video_path: str | None = None) -> TrialOutcome:
+                      video_path: str | None = None,
+                      companions: Sequence[Callable[[MavlinkVehicle], Awaitable[None]]] = ()) -> TrialOutcome:
     """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time).
     `tlog_path`: write every MAVLink message received to this telemetry log. `fault_listen`: a UDP address
     where PRELAND_FAULT_INJECTION commands change the land mode's faults while it flies. `preflight`: run
     the preflight checks first and refuse take-off when one fails. `camera_source` (a capture device or a
     video file) or `frame_source` (any FrameSource) replaces the virtual camera. `detection_log` (CSV) and
-    `video_path` keep every detection and every frame the companion saw."""
+    `video_path` keep every detection and every frame the companion saw. `companions`: coroutines run beside
+    the trial from the start (a SITL watchdog, a GPS-error driver); one that raises ends the trial with that
+    error."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
     vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path)
     clock = vehicle.clock
     events = EventLog(clock)
-    await vehicle.connect()
+    side_tasks = [asyncio.ensure_future(companion(vehicle)) for companion in companions]
+    try:
+        await _race(vehicle.connect(), side_tasks)
+        if truth:
+            await _race(vehicle.wait_for_truth(), side_tasks)
+    except BaseException:
+        await _stop(side_tasks)
+        await vehicle.close()
+        raise
     truth_source = None
     if truth:
-        await vehicle.wait_for_truth()
         truth_source = SimStateTruth(vehicle)
         truth_source.start()
     real_camera = frame_source or (_open_camera(camera_source, mission, clock) if camera_source else None)
@@ -100,6 +113,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
             passed = await run_preflight(vehicle=vehicle, clock=clock, spec=mission.preflight,
                                          precision=isinstance(strategy, PrecisionLanding), sensors=sensors)
         except PreflightFailed as error:
+            await _stop(side_tasks)
             for keeper in kept:
                 keeper.close()
             await vehicle.close()
@@ -129,10 +143,11 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         listener = await listen(fault_listen, on_fault_command)
     outcome, message = Outcome.LANDED, Outcome.LANDED.description
     try:
-        await runner.run()
+        await _race(runner.run(), side_tasks)
     except Exception as error:  # every failure is recorded as this trial's outcome
         outcome, message = outcome_for_error(error)
     finally:
+        await _stop(side_tasks)
         recording.cancel()
         await asyncio.gather(recording, return_exceptions=True)
         if listener is not None:
@@ -143,7 +158,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     trajectory = recorder.array()
     score = touchdown = None
     landing_time_s = None
-    command = events.first("land_command")
+    command = events.first("land_handover")
     if truth_source is not None and outcome is Outcome.LANDED and len(trajectory):
         final = trajectory[-1]
         reference = (mission.pad.offset_from_start_ned_m if strategy.scoring_reference is ScoringReference.PAD
@@ -171,6 +186,37 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         offset_east_cm=score.offset_east_cm if score else None,
         landing_time_s=landing_time_s, flight_time_s=flight_time_s, details=details, events=tuple(events.events),
         trajectory=trajectory)
+
+
+def _failed(task: asyncio.Future) -> bool:
+    return task.done() and not task.cancelled() and task.exception() is not None
+
+
+async def _race(work: Awaitable[T], side_tasks: list[asyncio.Future]) -> T:
+    """Await `work`; a side task that fails first cancels it and raises its error instead."""
+    main = asyncio.ensure_future(work)
+    try:
+        while True:
+            failed = [task for task in side_tasks if _failed(task)]
+            if failed:
+                main.cancel()
+                await asyncio.gather(main, return_exceptions=True)
+                raise failed[0].exception()
+            if main.done():
+                return main.result()
+            running = [task for task in side_tasks if not task.done()]
+            await asyncio.wait([main, *running], return_when=asyncio.FIRST_COMPLETED)
+    except BaseException:
+        if not main.done():
+            main.cancel()
+            await asyncio.gather(main, return_exceptions=True)
+        raise
+
+
+async def _stop(tasks: list[asyncio.Future]) -> None:
+    for task in tasks:
+        task.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)
 
 
 def _open_camera(source: str, mission, clock):

@@ -2,11 +2,14 @@
 
 Each trial gets its own SITL instance number (`-I N`, so parallel workers never
 share ports) held by a lock file, a temporary working folder (SITL writes its
-EEPROM and logs there), `--speedup`, the mission's home, ArduPilot's default
-copter parameters (`--defaults`, when given) plus the trial's parameters in a
-file of their own (precision landing from a companion, PLND_TYPE=1, needs a
-reboot to take effect, so it goes in at launch), and the scenario's wind as
-SIM_WIND_* parameters. SITL sends MAVLink to a UDP port the trial listens on
+EEPROM and logs there), `--speedup`, the mission's home, and `--defaults` in
+this order: ArduPilot's copter defaults (Tools/autotest/default_params/copter.parm
+of the build tree the binary sits in, else the small copy the package carries),
+the user's `--sitl-defaults` files, then the trial's own parameters in a file of
+their own: precision landing from a companion (PLND_TYPE=1) and the downward
+rangefinder (RNGFND1_TYPE) take effect only after a reboot, so they go in at
+launch; the scenario's wind as SIM_WIND_*; and the trial's GPS error as
+SIM_GPS_GLITCH_*, which `GpsErrorDriver` then moves along during the flight. SITL sends MAVLink to a UDP port the trial listens on
 (`--serial0 udpclient:127.0.0.1:PORT`). The process runs in its own process
 group, dies with the process that launched it (PR_SET_PDEATHSIG), and is
 stopped, group and all, when the trial ends, fails or is interrupted.
@@ -17,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import ctypes
 import fcntl
+import math
 import os
 import signal
 import socket
@@ -28,7 +32,9 @@ from pathlib import Path
 from ..config.mission import MissionSpec
 from ..errors import PrelandError
 from ..outcome import TrialOutcome
-from ..sim.spec import DEFAULT_HOME
+from ..sim.noise import GaussianStream, SmoothGaussMarkov, child_rng
+from ..sim.spec import DEFAULT_HOME, NavigationSpec
+from ..vehicle.mavlink_backend import MavlinkVehicle
 from .embedded import TrialRequest
 from .mavlink import fly_mavlink
 
@@ -37,8 +43,21 @@ MAX_INSTANCES = 64
 STOP_GRACE_S = 3.0
 
 
+PACKAGED_DEFAULTS = Path(__file__).with_name("data") / "sitl_copter.parm"
+COPTER_DEFAULTS_IN_TREE = Path("Tools") / "autotest" / "default_params" / "copter.parm"
+# ArduPilot SITL's rangefinder type (AP_RangeFinder::Type::SIM) and downward orientation (ROTATION_PITCH_270).
+RNGFND_TYPE_SIM = 100
+RNGFND_ORIENT_DOWN = 25
+GPS_UPDATE_PERIOD_S = 2.0  # vehicle seconds between SIM_GPS_GLITCH updates (the error wanders over ~10 s)
+METRES_PER_DEG_LAT = 111_319.49  # WGS-84 equatorial, as ArduPilot's LATLON_TO_M
+
+
 class SitlError(PrelandError):
     """The SITL binary is missing, not executable, or did not start."""
+
+
+class SitlExited(PrelandError):
+    """The SITL process ended while its trial was flying."""
 
 
 def resolve_sitl_binary(path: str | Path | None) -> Path:
@@ -54,16 +73,31 @@ def resolve_sitl_binary(path: str | Path | None) -> Path:
     return binary
 
 
+def find_copter_defaults(binary: Path) -> Path | None:
+    """ArduPilot's copter.parm for a binary inside an ArduPilot tree (build/sitl/bin/arducopter), else None."""
+    for folder in Path(binary).resolve().parents:
+        candidate = folder / COPTER_DEFAULTS_IN_TREE
+        if candidate.is_file():
+            return candidate
+    return None
+
+
 @dataclass(frozen=True)
 class SitlOptions:
-    """How to run SITL: the binary, its --speedup, --defaults files, extra parameters, and a folder for
-    one .tlog per trial (None: no logs)."""
+    """How to run SITL: the binary, its --speedup, extra --defaults files (after the copter defaults), extra
+    parameters, a folder for one .tlog per trial (None: no logs), and a UDP address for the thesis' fault
+    command (None: none)."""
 
     binary: Path
     speedup: float = 10.0
     defaults: tuple[Path, ...] = ()
     extra_params: dict[str, float] = field(default_factory=dict)
     tlog_dir: Path | None = None
+    fault_listen: str | None = None
+
+    def defaults_files(self) -> tuple[Path, ...]:
+        """copter.parm of the binary's ArduPilot tree (else the packaged copy), then the user's files."""
+        return (find_copter_defaults(self.binary) or PACKAGED_DEFAULTS, *self.defaults)
 
 
 def sim_params(mission: MissionSpec, seed: int) -> dict[str, float]:
@@ -86,6 +120,62 @@ def sim_params(mission: MissionSpec, seed: int) -> dict[str, float]:
     _, _, sigma_u_m_s, _ = dryden_scales(altitude_m=10.0, w20_m_s=wind.turbulence_w20_m_s)
     return {"SIM_WIND_SPD": wind.speed_m_s, "SIM_WIND_DIR": direction,
             "SIM_WIND_TURB": round(sigma_u_m_s, 3)}
+
+
+def rangefinder_params(mission: MissionSpec) -> dict[str, float]:
+    """SITL's simulated downward rangefinder (the thesis' drone had one), over the range the embedded
+    simulator's rangefinder uses; none when the mission's vehicle has no rangefinder."""
+    from ..sim.params import ARDUCOPTER_PARAMS
+
+    if not mission.environment.navigation.rangefinder_present:
+        return {}
+    ranged = {name: float(mission.params.get(name, ARDUCOPTER_PARAMS[name].default))
+              for name in ARDUCOPTER_PARAMS if name.startswith("RNGFND1_") and name != "RNGFND1_TYPE"}
+    return {"RNGFND1_TYPE": RNGFND_TYPE_SIM, "RNGFND1_ORIENT": RNGFND_ORIENT_DOWN, **ranged}
+
+
+class GpsErrorDriver:
+    """The trial's GPS position error on SITL: the embedded simulator's drift model (a smoothed Gauss-Markov
+    process per axis, `gps_drift_sigma_m`, `gps_drift_tau_s`, `gps_drift_smooth_s`, from the trial seed's own
+    stream) written into SITL's GPS glitch offsets, SIM_GPS_GLITCH_X/Y (degrees of latitude/longitude,
+    added to every GPS fix), every GPS_UPDATE_PERIOD_S vehicle seconds."""
+
+    def __init__(self, *, spec: NavigationSpec, seed: int, latitude_deg: float) -> None:
+        noise = GaussianStream(child_rng(seed, "sitl_gps"))
+        self._north = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
+                                        smooth_s=spec.gps_drift_smooth_s, noise=noise)
+        self._east = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
+                                       smooth_s=spec.gps_drift_smooth_s, noise=noise)
+        self._metres_per_deg_lon = METRES_PER_DEG_LAT * max(math.cos(math.radians(latitude_deg)), 1e-6)
+        self.updates = 0
+
+    @property
+    def error_ned_m(self) -> tuple[float, float]:
+        return self._north.value, self._east.value
+
+    def params(self) -> dict[str, float]:
+        """The current error as SITL parameters."""
+        return {"SIM_GPS_GLITCH_X": self._north.value / METRES_PER_DEG_LAT,
+                "SIM_GPS_GLITCH_Y": self._east.value / self._metres_per_deg_lon}
+
+    def step(self, dt_s: float) -> dict[str, float]:
+        self._north.step(dt_s)
+        self._east.step(dt_s)
+        return self.params()
+
+    async def run(self, vehicle: MavlinkVehicle) -> None:
+        """Move the error along in vehicle time for as long as the trial flies."""
+        while not vehicle.connected:
+            await asyncio.sleep(0.05)
+        clock = vehicle.clock
+        last_s = clock.now_s()
+        while True:
+            await clock.sleep(GPS_UPDATE_PERIOD_S)
+            now_s = clock.now_s()
+            for name, value in self.step(max(now_s - last_s, 0.0)).items():
+                await vehicle.set_param(name, value)
+            last_s = now_s
+            self.updates += 1
 
 
 def _free_udp_port() -> int:
@@ -135,8 +225,8 @@ class SitlInstance:
 
     def command(self, folder: Path) -> list[str]:
         params_file = folder / "preland.parm"
-        params_file.write_text("".join(f"{name} {value:g}\n" for name, value in sorted(self.params.items())))
-        defaults = ",".join(str(p) for p in (*self.options.defaults, params_file))
+        params_file.write_text("".join(f"{name} {value!r}\n" for name, value in sorted(self.params.items())))
+        defaults = ",".join(str(p) for p in (*self.options.defaults_files(), params_file))
         home = f"{self.home.latitude_deg},{self.home.longitude_deg},{self.home.altitude_amsl_m},{self.heading_deg:g}"
         return [str(self.options.binary), "--model", "+", "--speedup", f"{self.options.speedup:g}",
                 "--defaults", defaults, "-I", str(self.instance), f"--home={home}",
@@ -164,6 +254,27 @@ class SitlInstance:
     async def __aexit__(self, *exc: object) -> None:
         self.stop()
 
+    def exit_description(self) -> str | None:
+        """None while SITL runs; else how it ended ("killed by SIGKILL", "exited with code 1")."""
+        if self.process is None or self.process.poll() is None:
+            return None
+        code = self.process.returncode
+        if code < 0:
+            try:
+                return f"killed by {signal.Signals(-code).name}"
+            except ValueError:
+                return f"killed by signal {-code}"
+        return f"exited with code {code}"
+
+    async def watch(self, vehicle: MavlinkVehicle) -> None:
+        """Raise SitlExited as soon as the SITL process ends (its trial cannot go on)."""
+        while True:
+            ended = self.exit_description()
+            if ended is not None:
+                raise SitlExited(f"{self.options.binary.name} (SITL instance {self.instance}) {ended} "
+                                 "during the trial")
+            await asyncio.sleep(0.1)
+
     def stop(self) -> None:
         process = self.process
         if process is not None and process.poll() is None:
@@ -188,17 +299,23 @@ class SitlInstance:
 
 
 async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: str | None = None) -> TrialOutcome:
-    """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE)."""
+    """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE). SITL ending during
+    the trial ends it with outcome `error` naming how SITL ended."""
     mission = request.resolved_mission()
-    params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **sim_params(mission, request.seed), **mission.params,
-              **options.extra_params}
+    gps = GpsErrorDriver(spec=mission.environment.navigation, seed=request.seed,
+                         latitude_deg=DEFAULT_HOME.latitude_deg)
+    params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **rangefinder_params(mission), **sim_params(mission, request.seed),
+              **gps.params(), **mission.params, **options.extra_params}
     async with SitlInstance(options=options, params=params, heading_deg=mission.initial_yaw_deg) as sitl:
         tlog_path = None
         if options.tlog_dir is not None:
             tlog_path = str(Path(options.tlog_dir) / (tlog_name or f"{mission.name}_seed{request.seed}.tlog"))
-        outcome = await fly_mavlink(request, url=sitl.url, truth=True, tlog_path=tlog_path)
+        outcome = await fly_mavlink(request, url=sitl.url, truth=True, tlog_path=tlog_path,
+                                    fault_listen=options.fault_listen, companions=(sitl.watch, gps.run))
     outcome.details["runtime"] = "sitl"
     outcome.details["sitl_instance"] = sitl.instance
+    outcome.details["sitl_speedup"] = options.speedup
+    outcome.details["sitl_gps_error_cm"] = [round(v * 100.0, 1) for v in gps.error_ned_m]
     return outcome
 
 

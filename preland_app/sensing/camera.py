@@ -83,6 +83,10 @@ def load_calibration(path: str | Path, *, base: CameraModel = RPI_CAMERA_V2_640X
         text = Path(path).read_text(encoding="utf-8")
     except OSError as error:
         raise SpecError(path=path_text, field="", problem=f"cannot read calibration ({error.strerror})") from None
+    except UnicodeDecodeError as error:
+        from ..config.loader import not_utf8_problem
+
+        raise SpecError(path=path_text, field="", problem=not_utf8_problem(error)) from None
     if text.lstrip().startswith("%YAML"):
         return _load_filestorage(path_text, base)
     try:

@@ -5,7 +5,8 @@ their behaviour follow ArduCopter 4.x:
 
 * GUIDED: take-off, position targets (WPNAV_SPEED / WPNAV_ACCEL), velocity
   targets that time out after GUID_TIMEOUT, hold;
-* LOITER: hold the stopping point;
+* LOITER, POSHOLD: hold the stopping point (no pilot sticks here, so POSHOLD's braking and
+  stick mixing reduce to LOITER's hold);
 * LAND: hold the stopping point horizontally; descend as mode_land.cpp does
   (sqrt-shaped approach to LAND_ALT_LOW at up to LAND_SPEED_HIGH or
   WPNAV_SPEED_DN, then LAND_SPEED); disarm on land detection;
@@ -40,7 +41,8 @@ PRECLAND_ACCEPTABLE_ERROR_M = 0.15
 PRECLAND_MIN_DESCENT_SPEED_M_S = 0.10
 PLND_TYPE_COMPANION = 1
 TAKEOFF_COMPLETE_MARGIN_M = 0.1
-_ARMABLE_MODES = (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.STABILIZE)
+_ARMABLE_MODES = (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.POSHOLD, FlightMode.STABILIZE)
+_POSITION_MODES = (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.POSHOLD, FlightMode.RTL, FlightMode.LAND)
 
 
 class GuidedTarget(enum.Enum):
@@ -172,7 +174,7 @@ class Autopilot:
 
     def set_mode(self, mode: FlightMode) -> None:
         nav = self._nav("set_mode")
-        if mode in (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.RTL, FlightMode.LAND) and not nav.position_ok:
+        if mode in _POSITION_MODES and not nav.position_ok:
             raise CommandDenied(operation="set_mode", reason=f"{mode.name} requires a position estimate")
         if mode is FlightMode.RTL and not self.home_set:
             raise CommandDenied(operation="set_mode", reason="RTL requires home")
@@ -183,7 +185,7 @@ class Autopilot:
         if mode is FlightMode.GUIDED:
             self._guided = GuidedTarget.NONE
             self._hold_here()
-        elif mode in (FlightMode.LOITER, FlightMode.LAND):
+        elif mode in (FlightMode.LOITER, FlightMode.POSHOLD, FlightMode.LAND):
             self._hold_here()
             self._precland_active = False
             self.retry.reset()
@@ -292,7 +294,7 @@ class Autopilot:
             demand = self._run_land(dt_s, nav, self._target_north_m, self._target_east_m)
         elif self.mode is FlightMode.RTL:
             demand = self._run_rtl(dt_s, nav)
-        else:  # LOITER, and STABILIZE with no pilot: hold position and altitude
+        else:  # LOITER, POSHOLD, and STABILIZE with no pilot: hold position and altitude
             demand = self._fly_to(dt_s, nav, self._target_north_m, self._target_east_m, self._target_down_m,
                                   speed_max_m_s=self.params.m_s("LOIT_SPEED"))
         self.last_climb_demand_m_s = demand.climb_rate_m_s

@@ -10,17 +10,29 @@ until asked (MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM) on that
 channel; STATUSTEXT and changed parameters go to every channel. It handles COMMAND_LONG
 (arm/disarm, take-off, land, RTL, set mode, message intervals, message
 requests), SET_MODE, SET_POSITION_TARGET_LOCAL_NED (positions and velocities,
-local and body frames), SET_POSITION_TARGET_GLOBAL_INT, LANDING_TARGET and the
-PARAM protocol, and sends HEARTBEAT (ArduPilot autopilot, Copter custom
-modes), SYS_STATUS, GPS_RAW_INT, GLOBAL_POSITION_INT, LOCAL_POSITION_NED,
-ATTITUDE, HOME_POSITION, EXTENDED_SYS_STATE, DISTANCE_SENSOR, STATUSTEXT,
-COMMAND_ACK, PARAM_VALUE, and SIMSTATE / SIM_STATE with the ground truth.
+local and body frames), SET_POSITION_TARGET_GLOBAL_INT, LANDING_TARGET, the
+PARAM protocol, and (mavlink_face_gcs.py) the mission protocol and MAVLink FTP;
+it sends HEARTBEAT (ArduPilot autopilot, Copter custom modes), SYS_STATUS,
+GPS_RAW_INT, GLOBAL_POSITION_INT, LOCAL_POSITION_NED, ATTITUDE, HOME_POSITION,
+EXTENDED_SYS_STATE, DISTANCE_SENSOR, STATUSTEXT, COMMAND_ACK, PARAM_VALUE, and
+SIMSTATE / SIM_STATE with the ground truth.
+
+It is as strict as ArduCopter 4.6 where a client could tell the difference:
+parameters carry ArduPilot's storage type (PARAM_VALUE's param_type INT8/16/32
+or REAL32, the value cast to float), so a client reading an integer parameter
+as a float fails as it would on ArduPilot; an integer parameter set keeps what
+AP_Param::set_float keeps; parameters ArduPilot lacks are neither served nor
+accepted; a read or set of an unknown name gets no answer; SYS_STATUS reports
+sensors as ArduCopter does with no fence; and a UDP port another process
+already holds is refused rather than silently shared.
 """
 
 from __future__ import annotations
 
+import errno
 import math
 import os
+import socket
 from collections.abc import Sequence
 
 from pymavlink import mavutil
@@ -30,7 +42,8 @@ from ..clock import Clock
 from ..errors import CommandDenied, PrelandError
 from ..geo import GeoPoint, LocalTangentPlane
 from ..vehicle.types import FlightMode, LandedState, LandingTarget
-from .params import ARDUCOPTER_PARAMS
+from .mavlink_face_gcs import GroundStationServices
+from .params import ARDUCOPTER_PARAMS, ARDUPILOT_PARAM_NAMES
 from .simulator import Simulator
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -51,6 +64,20 @@ _ACCEPTED = mavlink2.MAV_RESULT_ACCEPTED
 _DENIED = mavlink2.MAV_RESULT_DENIED
 _UNSUPPORTED = mavlink2.MAV_RESULT_UNSUPPORTED
 _FAILED = mavlink2.MAV_RESULT_FAILED
+# ArduPilot answers a read by name and a set with param_index -1, which the uint16 field carries as 65535.
+_NO_PARAM_INDEX = 65535
+# What ArduCopter reports (GCS::update_sensor_status_flags, GCS_Copter::update_vehicle_sensor_status_flags).
+_SENSORS_ALWAYS = (mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+                   | mavlink2.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink2.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+                   | mavlink2.MAV_SYS_STATUS_SENSOR_BATTERY | mavlink2.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+                   | mavlink2.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+                   | mavlink2.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+                   | mavlink2.MAV_SYS_STATUS_SENSOR_YAW_POSITION | mavlink2.MAV_SYS_STATUS_SENSOR_PROPULSION)
+_SENSORS_NAVIGATION = (mavlink2.MAV_SYS_STATUS_AHRS | mavlink2.MAV_SYS_STATUS_SENSOR_GPS)
+_SENSORS_POSITION_CONTROL = (mavlink2.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+                             | mavlink2.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL)
+# ArduCopter 4.6.3, official release: FW_MAJOR << 24 | FW_MINOR << 16 | FW_PATCH << 8 | FW_TYPE.
+_FLIGHT_SW_VERSION = (4 << 24) | (6 << 16) | (3 << 8) | mavlink2.FIRMWARE_VERSION_TYPE_OFFICIAL
 
 
 class MavlinkFaceError(PrelandError):
@@ -67,13 +94,30 @@ def parse_listen(address: str) -> str:
     return f"{'udpout' if scheme in ('udpclient', 'udpout') else 'udpin'}:{host}:{port}"
 
 
+def _refuse_busy_port(listen: str, address: str) -> None:
+    """pymavlink's udpin sets SO_REUSEADDR, so a second server on a port would share it without a word; a
+    plain bind first (no SO_REUSEADDR) fails on a port anyone holds, which is then refused."""
+    host, _, port = address.partition(":")[2].rpartition(":")
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        probe.bind((host, int(port)))
+    except OSError as error:
+        reason = "address in use" if error.errno == errno.EADDRINUSE else (error.strerror or str(error))
+        raise MavlinkFaceError(f"--listen {listen!r}: {reason}") from None
+    finally:
+        probe.close()
+
+
 class _Channel:
     """One MAVLink port, as an ArduPilot serial port: its own peer and its own stream rates."""
 
     def __init__(self, *, listen: str, system_id: int) -> None:
         self.listen = listen
+        address = parse_listen(listen)
+        if address.startswith("udpin:"):
+            _refuse_busy_port(listen, address)
         try:
-            self.connection = mavutil.mavlink_connection(parse_listen(listen), source_system=system_id,
+            self.connection = mavutil.mavlink_connection(address, source_system=system_id,
                                                          source_component=1, dialect="ardupilotmega")
         except OSError as error:
             raise MavlinkFaceError(f"--listen {listen!r}: {error.strerror or error}") from None
@@ -81,10 +125,10 @@ class _Channel:
         self.intervals_s: dict[int, float] = {k: 1.0 / v for k, v in _STREAMS_DEFAULT_HZ.items()}
         self.next_send_s: dict[int, float] = {}
         # Sending first (udpclient) needs no peer to have spoken; listening waits for one.
-        self.peer_seen = parse_listen(listen).startswith("udpout")
+        self.peer_seen = address.startswith("udpout")
 
 
-class MavlinkFace:
+class MavlinkFace(GroundStationServices):
     """Serves one `Simulator` over MAVLink on a clock (wall time times a speed-up in practice).
 
     `listen`: one address or several (one channel each), `udp:HOST:PORT` or `udpclient:HOST:PORT`.
@@ -111,7 +155,7 @@ class MavlinkFace:
         self.heartbeats_enabled = True  # a test can silence them to simulate a lost link
         self._messages_sent = 0
         self.landing_targets = 0
-        self._param_names = sorted(ARDUCOPTER_PARAMS)
+        self._param_names = ARDUPILOT_PARAM_NAMES
         self._status_sent = 0
 
     # ---------------------------------------------------------------- running
@@ -209,10 +253,45 @@ class MavlinkFace:
         self.mav.heartbeat_send(mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode,
                                 autopilot.mode.value, status)
 
+    def sensor_flags(self) -> tuple[int, int, int]:
+        """SYS_STATUS' present, enabled and health bitmasks as ArduCopter builds them. With no fence the
+        geofence bit is in health only (AC_Fence::sys_status_failed is false when not present): a ground
+        station such as MAVProxy reads a clear health bit as a fence breach."""
+        sim = self.simulator
+        autopilot = sim.autopilot
+        params = sim.params
+        nav = sim.nav
+        present = (_SENSORS_ALWAYS | _SENSORS_NAVIGATION | _SENSORS_POSITION_CONTROL
+                   | mavlink2.MAV_SYS_STATUS_PREARM_CHECK)
+        enabled = _SENSORS_ALWAYS | _SENSORS_NAVIGATION
+        health = _SENSORS_ALWAYS | mavlink2.MAV_SYS_STATUS_GEOFENCE
+        if nav.position_ok:
+            health |= _SENSORS_NAVIGATION
+        if params.value("ARMING_CHECK") != 0:
+            enabled |= mavlink2.MAV_SYS_STATUS_PREARM_CHECK
+            if autopilot.armed or nav.position_ok:  # armed, or the pre-arm checks pass
+                health |= mavlink2.MAV_SYS_STATUS_PREARM_CHECK
+        if autopilot.armed and not autopilot.land_complete:  # the position controller runs
+            enabled |= _SENSORS_POSITION_CONTROL
+            health |= _SENSORS_POSITION_CONTROL
+        if sim.environment.navigation.rangefinder_present:
+            # Out of range (on the ground, say) is still data to ArduPilot (AP_RangeFinder_Backend::has_data).
+            present |= mavlink2.MAV_SYS_STATUS_SENSOR_LASER_POSITION
+            enabled |= mavlink2.MAV_SYS_STATUS_SENSOR_LASER_POSITION
+            health |= mavlink2.MAV_SYS_STATUS_SENSOR_LASER_POSITION
+        if params.value("PLND_ENABLED") == 1:
+            present |= mavlink2.MAV_SYS_STATUS_SENSOR_VISION_POSITION
+            enabled |= mavlink2.MAV_SYS_STATUS_SENSOR_VISION_POSITION
+            if autopilot.precland_enabled():  # a companion backend is healthy once it exists
+                health |= mavlink2.MAV_SYS_STATUS_SENSOR_VISION_POSITION
+        if sim.battery_remaining_fraction() <= 0:
+            health &= ~mavlink2.MAV_SYS_STATUS_SENSOR_BATTERY
+        return present, enabled, health
+
     def _send_sys_status(self) -> None:
         sim = self.simulator
-        sensors = 0x3FF
-        self.mav.sys_status_send(sensors, sensors, sensors, 200, int(sim.battery_voltage_v() * 1000), -1,
+        present, enabled, health = self.sensor_flags()
+        self.mav.sys_status_send(present, enabled, health, 200, int(sim.battery_voltage_v() * 1000), -1,
                                  int(100 * sim.battery_remaining_fraction()), 0, 0, 0, 0, 0, 0)
 
     def _estimate(self):
@@ -243,12 +322,19 @@ class MavlinkFace:
         self.mav.attitude_send(self.time_boot_ms(), body.roll_rad, body.pitch_rad,
                                (body.yaw_rad + math.pi) % (2 * math.pi) - math.pi, 0.0, 0.0, 0.0)
 
+    def home_location(self) -> GeoPoint:
+        """Home; before the first arming, the take-off spot, where ArduPilot would put home at its first fix."""
+        autopilot = self.simulator.autopilot
+        if not autopilot.home_set:
+            return self.simulator.origin
+        return self.plane.to_geodetic(north_m=autopilot.home_north_m, east_m=autopilot.home_east_m,
+                                      down_m=autopilot.home_down_m)
+
     def _send_home(self) -> None:
         autopilot = self.simulator.autopilot
         if not autopilot.home_set:
             return
-        home = self.plane.to_geodetic(north_m=autopilot.home_north_m, east_m=autopilot.home_east_m,
-                                      down_m=autopilot.home_down_m)
+        home = self.home_location()
         self.mav.home_position_send(int(home.latitude_deg * 1e7), int(home.longitude_deg * 1e7),
                                     int(home.altitude_amsl_m * 1000), autopilot.home_north_m, autopilot.home_east_m,
                                     autopilot.home_down_m, (1.0, 0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
@@ -291,11 +377,14 @@ class MavlinkFace:
                                   14 if nav.position_ok else 0)
 
     def _send_autopilot_version(self) -> None:
+        # No MAV_PROTOCOL_CAPABILITY_FTP: FTP requests are answered, but only with NAKs.
         capabilities = (mavlink2.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+                        | mavlink2.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+                        | mavlink2.MAV_PROTOCOL_CAPABILITY_MISSION_INT
                         | mavlink2.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                         | mavlink2.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
                         | mavlink2.MAV_PROTOCOL_CAPABILITY_COMMAND_INT)
-        self.mav.autopilot_version_send(capabilities, (4 << 24) | (7 << 16), 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
+        self.mav.autopilot_version_send(capabilities, _FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
                                         0, 0, 0)
 
     def _flush_status_text(self) -> None:
@@ -425,30 +514,43 @@ class MavlinkFace:
             timestamp_s=capture_s, angle_x_rad=message.angle_x, angle_y_rad=message.angle_y,
             distance_m=message.distance if message.distance > 0 else None, target_num=message.target_num))
 
-    def _param_value(self, name: str, *, every_channel: bool = False) -> None:
-        index = self._param_names.index(name)
+    def _param_value(self, name: str, *, index: int = _NO_PARAM_INDEX, every_channel: bool = False) -> None:
+        """PARAM_VALUE with ArduPilot's storage type and the value cast to float ("cast" encoding, as
+        ArduPilot sends it, not the bytes of the integer)."""
+        kind = ARDUCOPTER_PARAMS[name].kind
+        value = self.simulator.params.get(name)
         channels = [c for c in self.channels if c.peer_seen] if every_channel else [self._channel]
         for channel in channels:
-            channel.mav.param_value_send(name.encode("ascii"), self.simulator.params.get(name),
-                                         mavlink2.MAV_PARAM_TYPE_REAL32, len(self._param_names), index)
+            channel.mav.param_value_send(name.encode("ascii"), value, kind.mav_param_type, len(self._param_names),
+                                         index)
+
+    @staticmethod
+    def _param_id(message) -> str:
+        name = message.param_id if isinstance(message.param_id, str) else message.param_id.decode()
+        return name.rstrip("\x00")
 
     def _on_param_request_list(self, message) -> None:
-        for name in self._param_names:
-            self._param_value(name)
+        for index, name in enumerate(self._param_names):
+            self._param_value(name, index=index)
 
     def _on_param_request_read(self, message) -> None:
-        name = message.param_id if isinstance(message.param_id, str) else message.param_id.decode()
-        name = name.rstrip("\x00")
-        if message.param_index >= 0 and message.param_index < len(self._param_names) and not name:
-            name = self._param_names[message.param_index]
-        if name in ARDUCOPTER_PARAMS:
+        """By index when one is given (ArduPilot then ignores the name), else by name; nothing comes back
+        for an index out of range or a name ArduPilot does not have (GCS_Param.cpp's param_io_timer)."""
+        if message.param_index != -1:
+            if 0 <= message.param_index < len(self._param_names):
+                self._param_value(self._param_names[message.param_index], index=message.param_index)
+            return
+        name = self._param_id(message)
+        if name in self._param_names:
             self._param_value(name)
 
     def _on_param_set(self, message) -> None:
-        name = message.param_id if isinstance(message.param_id, str) else message.param_id.decode()
-        name = name.rstrip("\x00")
-        if name not in ARDUCOPTER_PARAMS:
-            self._say(f"unknown parameter {name}")
+        """An unknown name or a non-finite value is ignored without a word, as GCS_Param.cpp's
+        handle_param_set does; an integer parameter keeps what AP_Param::set_float keeps. Unlike ArduPilot,
+        which stores anything, a value outside the documented range is refused (the simulator's models
+        assume sane values): the value in force comes back."""
+        name = self._param_id(message)
+        if name not in self._param_names or not math.isfinite(message.param_value):
             return
         try:
             self.simulator.params.set(name, message.param_value)

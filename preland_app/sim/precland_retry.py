@@ -8,13 +8,9 @@ PLND_RET_BEHAVE (0: go back to where the vehicle was when it last saw the target
 (no retries below / above these rangefinder heights). The retry position is
 1.5 m above the last detection (ArduPilot's RETRY_OFFSET_ALT_M).
 
-The thesis' variant differs in three ways, each a parameter of the embedded
-autopilot only (ArduPilot has no such parameter; prefix PRL_):
-PRL_LOST_HOLD=1 holds position while waiting for the target (ArduPilot keeps
-descending); PRL_RET_ALT > 0 is the default height to go to when the retry
-position does not bring the target back, from where a new attempt starts
-(ArduPilot descends back and gives up); PRL_FS_HOLD is the hover time before the
-final blind descent once the retries are spent (ArduPilot: 7 s; thesis: none).
+The thesis' cautious variant (hold while waiting, a default retry height) is
+not the autopilot's: the cautious land mode does it from the companion
+(`landing/cautious_retry.py`), as it must on a real ArduPilot.
 """
 
 from __future__ import annotations
@@ -27,13 +23,13 @@ from .params import ParameterTable
 
 RETRY_OFFSET_ALT_M = 1.5  # AC_PrecLand_StateMachine
 MAX_POS_ERROR_M = 0.75  # AC_PrecLand_StateMachine
+FAILSAFE_INIT_TIMEOUT_S = 7.0  # AC_PrecLand_StateMachine: hover before the failsafe's blind descent
 
 
 class RetryState(enum.Enum):
     TRACKING = "tracking"  # target in sight (or never lost): normal precision descent
     WAITING = "waiting"  # target lost: hold or descend for PLND_TIMEOUT
     RETRY_CLIMB = "retry_climb"  # going back to where the target was last seen
-    RETRY_DEFAULT = "retry_default"  # thesis: going up to the default height
     RETRY_SETTLE = "retry_settle"  # ArduPilot: descending back to the detection height
     FAILSAFE_HOLD = "failsafe_hold"
     BLIND = "blind"  # retries spent: descend vertically
@@ -110,30 +106,14 @@ class LandingRetry:
             state = self.state
         if state is RetryState.WAITING:
             if now_s - self._lost_since_s < p.value("PLND_TIMEOUT"):
-                if p.value("PRL_LOST_HOLD") == 1 and self._hold_at is not None:
-                    return Directive(Action.GOTO, *self._hold_at)
                 return Directive(Action.DESCEND)
             return self._start_retry(now_s, strict)
         if state is RetryState.RETRY_CLIMB:
             goal = self._retry_position()
             if _distance(vehicle_ned_m, goal) < MAX_POS_ERROR_M:
-                retry_alt_m = p.value("PRL_RET_ALT")
-                if retry_alt_m > 0:
-                    self._enter(RetryState.RETRY_DEFAULT, now_s, "PrecLand: going to the retry height")
-                    return Directive(Action.GOTO, goal[0], goal[1], home_down_m - retry_alt_m)
                 self._enter(RetryState.RETRY_SETTLE, now_s)
             else:
                 return Directive(Action.GOTO, *goal)
-        if self.state is RetryState.RETRY_DEFAULT:
-            goal = self._retry_position()
-            default = (goal[0], goal[1], min(goal[2], home_down_m - p.value("PRL_RET_ALT")))
-            if _distance(vehicle_ned_m, default) < MAX_POS_ERROR_M:
-                # Still nothing from up here: wait, then try again (another attempt) or give up.
-                self._lost_since_s = now_s
-                self._hold_at = default
-                self._enter(RetryState.WAITING, now_s)
-                return Directive(Action.GOTO, *default)
-            return Directive(Action.GOTO, *default)
         if self.state is RetryState.RETRY_SETTLE:
             goal = self._retry_position()
             settle = (vehicle_ned_m[0], vehicle_ned_m[1], goal[2] + RETRY_OFFSET_ALT_M)
@@ -144,7 +124,7 @@ class LandingRetry:
         if self.state is RetryState.FAILSAFE_HOLD:
             if strict == 2:
                 return Directive(Action.HOLD)
-            if now_s - self._state_since_s >= p.value("PRL_FS_HOLD"):
+            if now_s - self._state_since_s >= FAILSAFE_INIT_TIMEOUT_S:
                 self._enter(RetryState.BLIND, now_s, "PrecLand: descending without the target")
                 return Directive(Action.DESCEND)
             return Directive(Action.HOLD)

@@ -1,12 +1,18 @@
 """The Vehicle protocol over MAVLink, for ArduPilot Copter (SITL or a real drone) and `preland sim serve`.
 
 MAVSDK (the `mavsdk` 4.x package) does the link: connection URLs, system
-discovery, the PARAM protocol (Param plugin) and commands with their
-COMMAND_ACK retries (MavlinkDirect.send_command). Everything else goes through
-MAVSDK's MavlinkDirect plugin as plain MAVLink messages, because ArduPilot's
-GUIDED mode, custom flight modes and LANDING_TARGET in MAV_FRAME_BODY_FRD have
-no dedicated MAVSDK API, and reading the raw messages keeps the autopilot's own
+discovery, and commands with their COMMAND_ACK retries
+(MavlinkDirect.send_command). Everything else goes through MAVSDK's
+MavlinkDirect plugin as plain MAVLink messages, because ArduPilot's GUIDED
+mode, custom flight modes and LANDING_TARGET in MAV_FRAME_BODY_FRD have no
+dedicated MAVSDK API, and reading the raw messages keeps the autopilot's own
 timestamps (time_boot_ms), which the vehicle clock follows.
+
+Parameters too go as plain PARAM_REQUEST_READ / PARAM_SET / PARAM_VALUE, with
+ArduPilot's types: each PARAM_VALUE says INT8/16/32 or REAL32, integer
+parameters are written as integers with their own type and read back exactly.
+(MAVSDK's Param plugin caches a failed typed read against ArduPilot and then
+refuses every write of that parameter with WRONG_TYPE.)
 
 Positions: LOCAL_POSITION_NED is relative to the EKF origin; the protocol's
 NED positions are relative to home (HOME_POSITION's x, y, z from the origin).
@@ -50,6 +56,9 @@ _LANDED = {0: LandedState.UNDEFINED, 1: LandedState.ON_GROUND, 2: LandedState.IN
            4: LandedState.LANDING}
 STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 10, "ATTITUDE": 10, "EXTENDED_SYS_STATE": 5,
               "SYS_STATUS": 2, "GPS_RAW_INT": 2, "HOME_POSITION": 1, "DISTANCE_SENSOR": 10}
+PARAM_TRIES = 3
+PARAM_TIMEOUT_S = 1.5  # wall seconds per try
+FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
 MESSAGE_IDS = {"HEARTBEAT": 0, "GLOBAL_POSITION_INT": 33, "LOCAL_POSITION_NED": 32, "ATTITUDE": 30, "EXTENDED_SYS_STATE": 245,
                "SYS_STATUS": 1, "GPS_RAW_INT": 24, "HOME_POSITION": 242, "DISTANCE_SENSOR": 132, "SIM_STATE": 108}
 
@@ -123,9 +132,12 @@ class MavlinkVehicle:
         self._last_heartbeat_wall: float | None = None
         self._sdk = None
         self._direct = None
-        self._param = None
+        self._param_types: dict[str, int] = {}  # name -> MAV_PARAM_TYPE, as the autopilot declares it
+        self._param_values: dict[str, tuple[float, int, int]] = {}  # name -> (value, type, receipt number)
+        self._param_receipts = 0
         self._tasks: list[asyncio.Task] = []
         self._closed = False
+        self._connected = False
         self.system_id = 1
         # HEARTBEAT comes at 1 Hz: an accepted arm/disarm or mode change holds until the next one confirms it.
         self._commanded_armed: tuple[bool, float] | None = None
@@ -135,13 +147,17 @@ class MavlinkVehicle:
     def clock(self) -> VehicleTimeClock:
         return self._clock
 
+    @property
+    def connected(self) -> bool:
+        """True from the end of `connect()` until `close()`."""
+        return self._connected and not self._closed
+
     # ---------------------------------------------------------------- link
 
     async def connect(self) -> None:
         _quiet_mavsdk_logs()
         from mavsdk.asyncio.mavsdk import Configuration, Mavsdk
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
-        from mavsdk.asyncio.plugins.param import ParamAsync
         from mavsdk.component_type import ComponentType
 
         self._sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER))
@@ -154,7 +170,6 @@ class MavlinkVehicle:
             raise LinkLost(operation="connect", reason=f"no autopilot on {self.url} within "
                                                         f"{self.connect_timeout_s:g} s")
         self._direct = MavlinkDirectAsync(system)
-        self._param = ParamAsync(system)
         self._tasks.append(asyncio.ensure_future(self._listen()))
         deadline = time.monotonic() + self.connect_timeout_s
         while not self._clock.settled or "HEARTBEAT" not in self._messages:
@@ -163,6 +178,7 @@ class MavlinkVehicle:
             await self._request_streams()
             await asyncio.sleep(0.2)
         await self._request_streams()
+        self._connected = True
 
     async def _request_streams(self) -> None:
         streams = dict(STREAMS_HZ)
@@ -187,6 +203,11 @@ class MavlinkVehicle:
             self._messages[name] = fields
             if name == "HEARTBEAT":
                 self._last_heartbeat_wall = time.monotonic()
+            elif name == "PARAM_VALUE":
+                self._param_receipts += 1
+                param_id = str(fields.get("param_id", "")).rstrip("\x00")
+                self._param_values[param_id] = (float(fields.get("param_value", 0.0)),
+                                                int(fields.get("param_type", 9)), self._param_receipts)
             elif name == "STATUSTEXT":
                 self._status_texts.append(str(fields.get("text", "")))
             if "time_boot_ms" in fields:
@@ -311,21 +332,49 @@ class MavlinkVehicle:
         hx, hy, hz = self._home_local()
         await self.goto_ned(position_ned_m=PositionNed(local["x"] - hx, local["y"] - hy, local["z"] - hz))
 
+    async def _param_exchange(self, name: str, *, operation: str, send: dict[str, Any] | None) -> tuple[float, int]:
+        """Send PARAM_SET (`send`) or PARAM_REQUEST_READ and wait for the PARAM_VALUE of `name` that answers it:
+        (value, MAV_PARAM_TYPE). ArduPilot answers nothing for a name it lacks."""
+        for _ in range(PARAM_TRIES):
+            self._check_link(operation)
+            seen = self._param_receipts
+            if send is None:
+                await self._send("PARAM_REQUEST_READ", {"param_id": name, "param_index": -1})
+            else:
+                await self._send("PARAM_SET", {"param_id": name, **send})
+            deadline = time.monotonic() + PARAM_TIMEOUT_S
+            while time.monotonic() < deadline:
+                answer = self._param_values.get(name)
+                if answer is not None and answer[2] > seen:
+                    return answer[0], answer[1]
+                await asyncio.sleep(0.01)
+        raise CommandDenied(operation=operation, reason=f"{name}: no PARAM_VALUE after {PARAM_TRIES} tries "
+                                                        "(no such parameter?)")
+
+    def param_type(self, name: str) -> str | None:
+        """'int' or 'float' once `name` has been read or written, else None."""
+        mav_type = self._param_types.get(name)
+        return None if mav_type is None else ("float" if mav_type in FLOAT_PARAM_TYPES else "int")
+
     async def get_param(self, name: str) -> float:
-        self._check_link("get_param")
-        try:
-            return float(await self._param.get_param_float(name))
-        except Exception as error:
-            raise CommandDenied(operation="get_param", reason=f"{name}: {error}") from None
+        value, mav_type = await self._param_exchange(name, operation="get_param", send=None)
+        self._param_types[name] = mav_type
+        return float(value)
 
     async def set_param(self, name: str, value: float) -> None:
-        self._check_link("set_param")
-        try:
-            await self._param.set_param_float(name, float(value))
-        except Exception as error:
-            raise CommandDenied(operation="set_param", reason=f"{name}={value:g}: {error}") from None
-        read = await self.get_param(name)
-        if abs(read - float(value)) > 1e-4 * max(1.0, abs(float(value))):
+        """Write `name` with its own type (read first when unknown); an integer parameter takes only a whole
+        number, and the value ArduPilot answers with must equal it exactly (a float within 1e-4 relative)."""
+        if name not in self._param_types:
+            await self.get_param(name)
+        mav_type = self._param_types[name]
+        is_int = mav_type not in FLOAT_PARAM_TYPES
+        if is_int and float(value) != round(float(value)):
+            raise CommandDenied(operation="set_param", reason=f"{name} is an integer parameter: {value:g} is not whole")
+        read, _ = await self._param_exchange(name, operation="set_param", send={
+            "param_value": float(round(float(value)) if is_int else value), "param_type": mav_type})
+        matches = read == round(float(value)) if is_int else \
+            abs(read - float(value)) <= 1e-4 * max(1.0, abs(float(value)))
+        if not matches:
             raise CommandDenied(operation="set_param", reason=f"{name} reads back {read:g}, not {value:g}")
 
     async def telemetry(self) -> Telemetry:

@@ -20,6 +20,7 @@ class FlightMode(enum.Enum):
     LOITER = 5
     RTL = 6
     LAND = 9
+    POSHOLD = 16
 
     @classmethod
     def parse(cls, text: str) -> "FlightMode":

@@ -15,6 +15,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from preland_app.clock_scaled import ScaledWallClock  # noqa: E402
 from preland_app.geo import GeoPoint  # noqa: E402
 from preland_app.sim.mavlink_face import MavlinkFace  # noqa: E402
+from preland_app.errors import CommandDenied  # noqa: E402
+from preland_app.sim.params import ARDUCOPTER_PARAMS  # noqa: E402
 from preland_app.sim.simulator import Simulator  # noqa: E402
 
 
@@ -30,14 +32,23 @@ def main() -> None:
     log_dir = os.environ.get("FAKE_SITL_LOG_DIR")
     if log_dir:
         Path(log_dir, f"{os.getpid()}.json").write_text(json.dumps({"pid": os.getpid(), "argv": sys.argv[1:]}))
-    params = {}
+    # ArduPilot reads every defaults file, later ones winning; the simulator models only some parameters,
+    # the others (compass offsets, RC calibration, SIM_*) are taken and ignored, as SITL would use them.
+    given = {}
     for path in filter(None, args.defaults.split(",")):
         for line in Path(path).read_text().splitlines():
-            name, _, value = line.partition(" ")
-            if name and not name.startswith(("#", "SIM_")):
-                params[name] = float(value)
+            fields = line.split()
+            if len(fields) >= 2 and not fields[0].startswith("#"):
+                given[fields[0]] = float(fields[1])
+    params = {name: value for name, value in given.items() if name in ARDUCOPTER_PARAMS}
     lat, lon, alt, heading = (float(v) for v in args.home.split(","))
     simulator = Simulator(seed=args.instance, origin=GeoPoint(lat, lon, alt), params=params, initial_yaw_deg=heading)
+    if not given.get("FRAME_CLASS"):
+        # ArduCopter's default FRAME_CLASS is 0 (undefined): its motors refuse to arm, as without copter.parm.
+        def refuse(*_args, **_kwargs):
+            raise CommandDenied(operation="arm", reason="Arm: Motors: Check frame class and type")
+
+        simulator.autopilot.arm = refuse
     face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=args.speedup), listen=args.serial0)
     asyncio.run(face.run())
 

@@ -1,0 +1,153 @@
+"""The thesis' scenarios (Tables 3 to 5) on ArduPilot SITL and on the embedded simulator, side by side,
+and SITL's throughput and result stability across speedups.
+
+Part 1: every scenario of benchmarks/fault_scenarios_table.py, the same seeds on both runtimes (same
+weather, same faults, same mission): mean and maximum landing error (cm), mean landing time (s), and
+SITL / embedded ratios of each. A precision scenario "agrees" when the means are within 30 % or 3 cm,
+whichever is larger.
+
+Part 2: SITL trials per minute per core at several --speedup values (the marker scenario, the same seeds
+at every speedup), and the landing errors' change against the lowest speedup: SITL is not bit-exact
+across speedups, so this measures how far results move.
+
+Needs an arducopter SITL binary: --sitl PATH or $PRELAND_SITL_BINARY.
+
+Usage: python benchmarks/sitl_vs_embedded.py [--seeds 10] [--workers 2] [--only LABEL,...]
+                                             [--speedups 5,10,20,50] [--sweep-seeds 6] [--skip-compare]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from fault_scenarios_table import CALM, GUSTY, SCENARIOS  # noqa: E402
+
+from preland_app.config.mission import load_mission  # noqa: E402
+from preland_app.runtime.embedded import TrialRequest, run_trial  # noqa: E402
+from preland_app.runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial  # noqa: E402
+
+SWEEP_LABEL = "T3 marker"
+
+
+def _request(label: str, seed: int) -> TrialRequest:
+    mode, sensor, faults, height, *_ = SCENARIOS[label]
+    mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
+    wind = CALM if label.startswith("T3") else GUSTY
+    environment = replace(mission.environment, wind=replace(mission.environment.wind, **wind))
+    return TrialRequest(mission=replace(mission, environment=environment), seed=seed, land_mode=mode, sensor=sensor,
+                        faults=faults, takeoff_altitude_rel_m=float(height), record_trajectory=False)
+
+
+def _one(job: tuple[str, str, int, str, float]) -> tuple:
+    """(runtime, label, seed, outcome, error cm, landing time s, wall s)"""
+    runtime, label, seed, binary, speedup = job
+    started = time.perf_counter()
+    request = _request(label, seed)
+    if runtime == "sitl":
+        outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup))
+    else:
+        outcome = run_trial(request)
+    return (runtime, label, seed, outcome.outcome.value, outcome.landing_error_cm, outcome.landing_time_s,
+            time.perf_counter() - started, speedup, outcome.message)
+
+
+def _mean(values: list[float]) -> float | None:
+    return statistics.mean(values) if values else None
+
+
+def _fmt(value: float | None, width: int, digits: int = 1) -> str:
+    return f"{'-':>{width}}" if value is None else f"{value:{width}.{digits}f}"
+
+
+def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup: float) -> None:
+    jobs = [(runtime, label, seed, binary, speedup) for label in labels for seed in range(seeds)
+            for runtime in ("sitl", "embedded")]
+    started = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        results = list(pool.map(_one, jobs, chunksize=1))
+    print(f"thesis scenarios, {seeds} seeds each, SITL at {speedup:g}x beside the embedded simulator "
+          "(error cm, landing time s)")
+    print(f"{'scenario':<22} {'SITL landed':>11} {'mean':>6} {'max':>6} {'time':>6}   {'emb landed':>10} {'mean':>6} "
+          f"{'max':>6} {'time':>6}   {'mean x':>6} {'max x':>6} {'time x':>6}  agree")
+    for label in labels:
+        row = {}
+        for runtime in ("sitl", "embedded"):
+            rows = [r for r in results if r[0] == runtime and r[1] == label]
+            errors = [r[4] for r in rows if r[3] == "landed" and r[4] is not None]
+            times = [r[5] for r in rows if r[3] == "landed" and r[5] is not None]
+            row[runtime] = (sum(r[3] == "landed" for r in rows), len(rows), _mean(errors),
+                            max(errors) if errors else None, _mean(times))
+            for r in rows:
+                if r[3] != "landed":
+                    print(f"  {runtime} {label} seed {r[2]}: {r[3]} {r[8]}")
+        s, e = row["sitl"], row["embedded"]
+
+        def ratio(a, b):
+            return None if a is None or not b else a / b
+
+        agree = ""
+        if SCENARIOS[label][0] != "normal" and s[2] is not None and e[2] is not None:
+            agree = "yes" if abs(s[2] - e[2]) <= max(0.3 * e[2], 3.0) else "NO"
+        print(f"{label:<22} {s[0]:>7}/{s[1]:<3} {_fmt(s[2], 6)} {_fmt(s[3], 6)} {_fmt(s[4], 6)}   "
+              f"{e[0]:>6}/{e[1]:<3} {_fmt(e[2], 6)} {_fmt(e[3], 6)} {_fmt(e[4], 6)}   "
+              f"{_fmt(ratio(s[2], e[2]), 6, 2)} {_fmt(ratio(s[3], e[3]), 6, 2)} {_fmt(ratio(s[4], e[4]), 6, 2)}  {agree}")
+    print(f"wall time {time.perf_counter() - started:.0f} s with {workers} worker(s)")
+
+
+def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int) -> None:
+    print(f"\nSITL throughput and stability: {SWEEP_LABEL}, seeds 0..{seeds - 1}, {workers} worker(s)")
+    print(f"{'speedup':>7} {'landed':>6} {'trials/min/core':>15} {'wall s/trial':>12} {'mean cm':>8} "
+          f"{'mean |change| cm vs first':>26}")
+    baseline: dict[int, float] | None = None
+    for speedup in speedups:
+        jobs = [("sitl", SWEEP_LABEL, seed, binary, speedup) for seed in range(seeds)]
+        started = time.perf_counter()
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            results = list(pool.map(_one, jobs, chunksize=1))
+        wall_s = time.perf_counter() - started
+        errors = {r[2]: r[4] for r in results if r[3] == "landed" and r[4] is not None}
+        change = None
+        if baseline is None:
+            baseline = errors
+        else:
+            shared = sorted(set(errors) & set(baseline))
+            change = _mean([abs(errors[s] - baseline[s]) for s in shared])
+        per_core = len(results) / (wall_s / 60.0) / workers
+        print(f"{speedup:>7g} {len(errors):>3}/{len(results):<2} {per_core:15.2f} {_mean([r[6] for r in results]):12.1f} "
+              f"{_fmt(_mean(list(errors.values())), 8)} {_fmt(change, 26)}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sitl", default=None, help="arducopter binary (default $PRELAND_SITL_BINARY)")
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--speedup", type=float, default=10.0, help="SITL speedup of the comparison")
+    parser.add_argument("--only", default="", help="comma-separated scenario labels")
+    parser.add_argument("--speedups", default="5,10,20,50")
+    parser.add_argument("--sweep-seeds", type=int, default=6)
+    parser.add_argument("--skip-compare", action="store_true")
+    parser.add_argument("--skip-sweep", action="store_true")
+    args = parser.parse_args()
+    binary = str(resolve_sitl_binary(args.sitl))
+    labels = [label for label in SCENARIOS if not args.only or label in args.only.split(",")]
+    if not args.skip_compare:
+        compare(binary=binary, labels=labels, seeds=args.seeds, workers=args.workers, speedup=args.speedup)
+    if not args.skip_sweep:
+        sweep(binary=binary, speedups=[float(v) for v in args.speedups.split(",")], seeds=args.sweep_seeds,
+              workers=args.workers)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,34 @@
+"""The public Python API, used through `preland_app` alone."""
+
+import preland_app as preland
+
+from .conftest import ROOT
+
+
+def test_the_public_api_flies_runs_a_campaign_and_reads_it_back(tmp_path):
+    mission = preland.load_mission(ROOT / "missions" / "thesis_square_land.yaml")
+    outcome = preland.fly(mission, seed=8, land="irlock", faults={"irlock": "random:0.5"})
+    assert isinstance(outcome, preland.TrialOutcome) and outcome.outcome is preland.Outcome.LANDED
+    assert outcome.scoring_reference == "pad" and outcome.landing_error_cm < 20.0
+    assert outcome.details["irlock_dropped"] > 0 and outcome.landing_time_s > 10.0
+
+    campaign = tmp_path / "campaign.yaml"
+    campaign.write_text(f"name: api\nmission: {ROOT / 'missions' / 'thesis_square_land.yaml'}\ntrials: 2\n"
+                        "base_seed: 3\nscenarios:\n  - {label: gps, land: normal}\n")
+    run = preland.run_campaign(campaign, db=tmp_path / "results.db", workers=1)
+    assert (run.name, run.ran, run.total) == ("api", 2, 2)
+    rows = preland.read_results(run.db, campaign="api")
+    assert [row["trial_index"] for row in rows] == [0, 1] and all(row["outcome"] == "landed" for row in rows)
+    # What the store holds is what fly() gives for the same seed.
+    again = preland.fly(mission, seed=rows[1]["seed"], record_trajectory=False)
+    assert round(again.landing_error_cm, 2) == rows[1]["landing_error_cm"]
+    assert rows[1]["details"]["wind_from_deg"] == again.details["wind_from_deg"]
+
+    assert {row.name for row in preland.land_modes()} >= {"normal", "marker", "paper_adaptive"}
+    assert preland.schema("pad")["additionalProperties"] is False
+    try:
+        preland.fly(mission, land="preland_no_such_module:Landing")
+    except preland.SpecError as error:
+        assert error.field == "land.mode" and "no module named" in error.problem
+    else:
+        raise AssertionError("an unknown land mode must raise SpecError")
