@@ -158,3 +158,35 @@ def test_fault_commands_reach_the_flying_companion(thesis_mission):
     event = next(e for e in outcome.events if e.kind == "fault_command")
     assert event.data["target"] == 2 and event.data["r_drop"] == 1.0
     assert outcome.details["marker_fault"] == "permanent" and outcome.details["marker_dropped"] > 20
+
+
+def test_parameters_are_read_and_written_with_ardupilots_types(thesis_mission):
+    """ArduPilot declares PLND_ENABLED INT8 and PLND_TIMEOUT REAL32 (the face too); a float-only client
+    failed on real ArduPilot with WRONG_TYPE, so the backend reads and writes each with its own type."""
+    from preland_app.errors import CommandDenied
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
+
+    served = ServedSimulator(thesis_mission, seed=1, speedup=10.0)
+
+    async def main():
+        vehicle = MavlinkVehicle(url=served.url)
+        await vehicle.connect()
+        try:
+            await vehicle.set_param("PLND_ENABLED", 1)
+            await vehicle.set_param("PLND_TIMEOUT", 2.5)
+            types = vehicle.param_type("PLND_ENABLED"), vehicle.param_type("PLND_TIMEOUT")
+            values = await vehicle.get_param("PLND_ENABLED"), await vehicle.get_param("PLND_TIMEOUT")
+            with pytest.raises(CommandDenied, match="integer parameter"):
+                await vehicle.set_param("PLND_STRICT", 1.5)
+            with pytest.raises(CommandDenied, match="no PARAM_VALUE"):
+                await vehicle.get_param("PRL_RET_ALT")  # not an ArduPilot parameter: no answer, as ArduPilot
+            return types, values
+        finally:
+            await vehicle.close()
+
+    try:
+        types, values = asyncio.run(main())
+    finally:
+        served.stop()
+    assert types == ("int", "float") and values == (1.0, 2.5)
+    assert served.simulator.params.value("PLND_ENABLED") == 1 and served.simulator.params.value("PLND_TIMEOUT") == 2.5

@@ -20,6 +20,37 @@ from preland_app.sim.params import ARDUCOPTER_PARAMS  # noqa: E402
 from preland_app.sim.simulator import Simulator  # noqa: E402
 
 
+# SITL's own parameters that preland writes during a flight (libraries/SITL/SITL.cpp, 4.6: AP_Vector3f,
+# served as three REAL32). The stand-in serves and stores them; its GPS error stays the simulator's own.
+SITL_FLOAT_PARAMS = ("SIM_GPS_GLITCH_X", "SIM_GPS_GLITCH_Y", "SIM_GPS_GLITCH_Z")
+
+
+class SitlFace(MavlinkFace):
+    """The face plus SITL's own SIM_* parameters, as a SITL build has them (REAL32)."""
+
+    def __init__(self, *, sim_values: dict[str, float], **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.sim_values = {name: sim_values.get(name, 0.0) for name in SITL_FLOAT_PARAMS}
+
+    def _sim_value(self, name: str) -> None:
+        self.mav.param_value_send(name.encode("ascii"), self.sim_values[name], 9, len(self._param_names), 65535)
+
+    def _on_param_request_read(self, message) -> None:
+        name = self._param_id(message)
+        if message.param_index == -1 and name in self.sim_values:
+            self._sim_value(name)
+        else:
+            super()._on_param_request_read(message)
+
+    def _on_param_set(self, message) -> None:
+        name = self._param_id(message)
+        if name in self.sim_values:
+            self.sim_values[name] = float(message.param_value)
+            self._sim_value(name)
+        else:
+            super()._on_param_set(message)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--model")
@@ -49,7 +80,8 @@ def main() -> None:
             raise CommandDenied(operation="arm", reason="Arm: Motors: Check frame class and type")
 
         simulator.autopilot.arm = refuse
-    face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=args.speedup), listen=args.serial0)
+    face = SitlFace(simulator=simulator, clock=ScaledWallClock(speedup=args.speedup), listen=args.serial0,
+                    sim_values=given)
     asyncio.run(face.run())
 
 
