@@ -27,12 +27,17 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/sim_speed.py
 	$(VENV)/bin/python benchmarks/vision_speed.py
+	$(VENV)/bin/python benchmarks/loop_speed.py
 	$(VENV)/bin/python benchmarks/campaign_wall_time.py
+	$(VENV)/bin/python benchmarks/executor_overhead.py
+	$(VENV)/bin/python benchmarks/store_growth.py
 	$(VENV)/bin/python benchmarks/normal_landing_table.py
 	$(VENV)/bin/python benchmarks/land_modes_table.py
 	$(VENV)/bin/python benchmarks/fault_scenarios_table.py
 	$(VENV)/bin/python benchmarks/drop_rate_sensitivity.py
 	$(VENV)/bin/python benchmarks/paper_table.py
+	@if [ -n "$$PRELAND_SITL_BINARY" ]; then $(VENV)/bin/python benchmarks/sitl_vs_embedded.py; \
+	else echo "benchmarks/sitl_vs_embedded.py skipped: set PRELAND_SITL_BINARY to an arducopter SITL binary"; fi
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -16,7 +16,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from preland_app.campaign.executor import run_campaign  # noqa: E402
+from preland_app.campaign.driver import run_campaign  # noqa: E402
 from preland_app.campaign.spec import load_campaign  # noqa: E402
 from preland_app.campaign.store import ResultsStore  # noqa: E402
 

@@ -14,6 +14,7 @@ Needs an arducopter SITL binary: --sitl PATH or $PRELAND_SITL_BINARY.
 
 Usage: python benchmarks/sitl_vs_embedded.py [--seeds 10] [--workers 2] [--only LABEL,...]
                                              [--speedups 5,10,20,50] [--sweep-seeds 6] [--skip-compare]
+                                             [--sweep-scenarios LABEL,...] [--skip-sweep]
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ from preland_app.runtime.embedded import TrialRequest, run_trial  # noqa: E402
 from preland_app.runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial  # noqa: E402
 
 SWEEP_LABEL = "T3 marker"
+# The camera's frames processed per vehicle second while landing: on SITL the companion runs in wall time,
+# so at a high speedup it processes fewer frames per vehicle second than the camera's 30.
 
 
 def _request(label: str, seed: int) -> TrialRequest:
@@ -51,15 +54,17 @@ def _request(label: str, seed: int) -> TrialRequest:
 
 def _one(job: tuple[str, str, int, str, float]) -> tuple:
     """(runtime, label, seed, outcome, error cm, landing time s, wall s)"""
-    runtime, label, seed, binary, speedup = job
+    runtime, label, seed, binary, speedup = job  # speedup None: preland's default
     started = time.perf_counter()
     request = _request(label, seed)
     if runtime == "sitl":
         outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup))
     else:
         outcome = run_trial(request)
+    frames = outcome.details.get("marker_frames")
+    camera_hz = frames / outcome.landing_time_s if frames and outcome.landing_time_s else None
     return (runtime, label, seed, outcome.outcome.value, outcome.landing_error_cm, outcome.landing_time_s,
-            time.perf_counter() - started, speedup, outcome.message)
+            time.perf_counter() - started, speedup, outcome.message, camera_hz)
 
 
 def _mean(values: list[float]) -> float | None:
@@ -70,16 +75,17 @@ def _fmt(value: float | None, width: int, digits: int = 1) -> str:
     return f"{'-':>{width}}" if value is None else f"{value:{width}.{digits}f}"
 
 
-def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup: float) -> None:
+def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup: float | None) -> None:
     jobs = [(runtime, label, seed, binary, speedup) for label in labels for seed in range(seeds)
             for runtime in ("sitl", "embedded")]
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
         results = list(pool.map(_one, jobs, chunksize=1))
-    print(f"thesis scenarios, {seeds} seeds each, SITL at {speedup:g}x beside the embedded simulator "
+    at = "preland's default speedup (2x with a camera, else 10x)" if speedup is None else f"{speedup:g}x"
+    print(f"thesis scenarios, {seeds} seeds each, SITL at {at} beside the embedded simulator "
           "(error cm, landing time s)")
     print(f"{'scenario':<22} {'SITL landed':>11} {'mean':>6} {'max':>6} {'time':>6}   {'emb landed':>10} {'mean':>6} "
-          f"{'max':>6} {'time':>6}   {'mean x':>6} {'max x':>6} {'time x':>6}  agree")
+          f"{'max':>6} {'time':>6}   {'mean x':>6} {'max x':>6} {'time x':>6}  agree  cam Hz SITL/emb")
     for label in labels:
         row = {}
         for runtime in ("sitl", "embedded"):
@@ -87,7 +93,8 @@ def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup
             errors = [r[4] for r in rows if r[3] == "landed" and r[4] is not None]
             times = [r[5] for r in rows if r[3] == "landed" and r[5] is not None]
             row[runtime] = (sum(r[3] == "landed" for r in rows), len(rows), _mean(errors),
-                            max(errors) if errors else None, _mean(times))
+                            max(errors) if errors else None, _mean(times),
+                            _mean([r[9] for r in rows if r[9] is not None]))
             for r in rows:
                 if r[3] != "landed":
                     print(f"  {runtime} {label} seed {r[2]}: {r[3]} {r[8]}")
@@ -101,17 +108,18 @@ def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup
             agree = "yes" if abs(s[2] - e[2]) <= max(0.3 * e[2], 3.0) else "NO"
         print(f"{label:<22} {s[0]:>7}/{s[1]:<3} {_fmt(s[2], 6)} {_fmt(s[3], 6)} {_fmt(s[4], 6)}   "
               f"{e[0]:>6}/{e[1]:<3} {_fmt(e[2], 6)} {_fmt(e[3], 6)} {_fmt(e[4], 6)}   "
-              f"{_fmt(ratio(s[2], e[2]), 6, 2)} {_fmt(ratio(s[3], e[3]), 6, 2)} {_fmt(ratio(s[4], e[4]), 6, 2)}  {agree}")
+              f"{_fmt(ratio(s[2], e[2]), 6, 2)} {_fmt(ratio(s[3], e[3]), 6, 2)} {_fmt(ratio(s[4], e[4]), 6, 2)}  {agree:<5}  "
+              + ("" if s[5] is None else f"{s[5]:.1f}/{_fmt(e[5], 1)}"))
     print(f"wall time {time.perf_counter() - started:.0f} s with {workers} worker(s)")
 
 
-def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int) -> None:
-    print(f"\nSITL throughput and stability: {SWEEP_LABEL}, seeds 0..{seeds - 1}, {workers} worker(s)")
+def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int, label: str = SWEEP_LABEL) -> None:
+    print(f"\nSITL throughput and stability: {label}, seeds 0..{seeds - 1}, {workers} worker(s)")
     print(f"{'speedup':>7} {'landed':>6} {'trials/min/core':>15} {'wall s/trial':>12} {'mean cm':>8} "
-          f"{'mean |change| cm vs first':>26}")
+          f"{'mean |change| cm vs first':>26} {'camera Hz':>9}")
     baseline: dict[int, float] | None = None
     for speedup in speedups:
-        jobs = [("sitl", SWEEP_LABEL, seed, binary, speedup) for seed in range(seeds)]
+        jobs = [("sitl", label, seed, binary, speedup) for seed in range(seeds)]
         started = time.perf_counter()
         with ProcessPoolExecutor(max_workers=workers) as pool:
             results = list(pool.map(_one, jobs, chunksize=1))
@@ -125,7 +133,11 @@ def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int) -> No
             change = _mean([abs(errors[s] - baseline[s]) for s in shared])
         per_core = len(results) / (wall_s / 60.0) / workers
         print(f"{speedup:>7g} {len(errors):>3}/{len(results):<2} {per_core:15.2f} {_mean([r[6] for r in results]):12.1f} "
-              f"{_fmt(_mean(list(errors.values())), 8)} {_fmt(change, 26)}")
+              f"{_fmt(_mean(list(errors.values())), 8)} {_fmt(change, 26)} "
+              f"{_fmt(_mean([r[9] for r in results if r[9] is not None]), 9)}")
+        for r in results:
+            if r[3] != "landed":
+                print(f"    seed {r[2]}: {r[3]} {r[8]}")
 
 
 def main() -> None:
@@ -133,10 +145,13 @@ def main() -> None:
     parser.add_argument("--sitl", default=None, help="arducopter binary (default $PRELAND_SITL_BINARY)")
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--speedup", type=float, default=10.0, help="SITL speedup of the comparison")
+    parser.add_argument("--speedup", type=float, default=None,
+                        help="SITL speedup of the comparison (default: preland's, 2x with a camera, else 10x)")
     parser.add_argument("--only", default="", help="comma-separated scenario labels")
     parser.add_argument("--speedups", default="5,10,20,50")
     parser.add_argument("--sweep-seeds", type=int, default=6)
+    parser.add_argument("--sweep-scenarios", default=f"{SWEEP_LABEL},T3 marker random0.5",
+                        help="comma-separated scenario labels swept over the speedups")
     parser.add_argument("--skip-compare", action="store_true")
     parser.add_argument("--skip-sweep", action="store_true")
     args = parser.parse_args()
@@ -145,8 +160,9 @@ def main() -> None:
     if not args.skip_compare:
         compare(binary=binary, labels=labels, seeds=args.seeds, workers=args.workers, speedup=args.speedup)
     if not args.skip_sweep:
-        sweep(binary=binary, speedups=[float(v) for v in args.speedups.split(",")], seeds=args.sweep_seeds,
-              workers=args.workers)
+        for label in args.sweep_scenarios.split(","):
+            sweep(binary=binary, speedups=[float(v) for v in args.speedups.split(",")], seeds=args.sweep_seeds,
+                  workers=args.workers, label=label)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ _API = (
     "CampaignRun", "CampaignSpec", "LandModeRow", "LandStrategy", "LandingContext", "LandingReport", "MarkerFrame",
     "MissionSpec", "Outcome", "PrelandError", "ScoringReference", "SpecError", "TrialOutcome", "fly", "land_modes",
     "load_campaign", "load_mission", "read_results", "run_campaign", "schema",
+    "compare_runs", "export_results", "list_campaigns", "read_trial", "summarize_campaign", "write_campaign_report",
 )
 __all__ = ["__version__", *_API]
 

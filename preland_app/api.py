@@ -1,4 +1,5 @@
-"""preland's Python API: load missions and campaigns, fly trials on any runtime, run campaigns, read results.
+"""preland's Python API: load missions and campaigns, fly trials on any runtime, run campaigns, read results
+(list, one trial in full, per-scenario spread, comparisons, exports, reports).
 
 Everything here is re-exported from `preland_app` (`from preland_app import fly`). Units are in the
 names: metres (`_m`), vehicle seconds (`_s`), centimetres for landing errors (`_cm`), degrees (`_deg`).
@@ -51,14 +52,14 @@ def _mission(mission: MissionSpec | str | os.PathLike) -> MissionSpec:
 def fly(mission: MissionSpec | str | os.PathLike, *, seed: int = 1, land: str | None = None,
         land_params: Mapping[str, Any] | None = None, sensor: str | None = None,
         faults: Mapping[str, str] | None = None, takeoff_altitude_m: float | None = None,
-        connect: str | None = None, sitl: str | os.PathLike | None = None, sitl_speedup: float = 10.0,
+        connect: str | None = None, sitl: str | os.PathLike | None = None, sitl_speedup: float | None = None,
         truth: bool = True, record_trajectory: bool = True) -> TrialOutcome:
     """Fly one trial of `mission` (a MissionSpec or a mission file) and return its outcome.
 
     Runtime: the embedded simulator (default; virtual time, several hundred times faster than real time),
     `connect=URL` (MAVLink: `udpout://127.0.0.1:14550` for `preland sim serve`, a real drone; `truth=False`
     when it reports no ground truth), or `sitl=PATH` (a fresh ArduPilot SITL `arducopter` process at
-    `sitl_speedup`). `land`: a land mode by name or import path `package.module:ClassName`, overriding the
+    `sitl_speedup`; None: 2 for land modes that read camera frames, 10 for the others). `land`: a land mode by name or import path `package.module:ClassName`, overriding the
     mission's; `land_params`: its keyword options (checked against its class). `faults`: sensor -> fault
     (`{"marker": "below:3"}`). `takeoff_altitude_m`: above home. Same seed, same outcome (embedded).
     The outcome has `landing_error_cm`, `offset_north_cm`, `offset_east_cm`, `landing_time_s` (from the
@@ -103,24 +104,38 @@ class CampaignRun:
 
 def run_campaign(campaign: CampaignSpec | str | os.PathLike, *, db: str | os.PathLike = "results.db",
                  workers: int | None = None, resume: bool = False, sitl: str | os.PathLike | None = None,
-                 sitl_speedup: float = 10.0,
-                 progress: Callable[[int, int, Any], None] | None = None) -> CampaignRun:
-    """Run a campaign (a CampaignSpec or a campaign file) into the SQLite store `db`, each trial in a
-    worker process (`workers`, default one per core; a plugin land mode's module must be importable
-    there: on sys.path or PYTHONPATH). `resume=True` finishes a campaign already in the store without
-    repeating a trial. `sitl=PATH`: every trial on a fresh ArduPilot SITL process. `progress(done, total,
-    record)` is called as trials finish. Read the results back with `read_results`."""
-    from .campaign.executor import run_campaign as execute
+                 sitl_speedup: float | None = None, progress: Callable[[int, int, Any], None] | None = None,
+                 executor: str = "local", ray_address: str | None = None, trial_cpus: float = 1.0,
+                 outcomes_only: bool = False) -> CampaignRun:
+    """Run a campaign (a CampaignSpec or a campaign file) into the SQLite store `db`.
+
+    `executor="local"` (default): each trial in a worker process on this machine (`workers`, default one
+    per core; a plugin land mode's module must be importable there: on sys.path or PYTHONPATH).
+    `executor="ray"`: each trial a task of a Ray cluster (`trial_cpus` CPUs each): the one at `ray_address`
+    (`auto`, `ray://host:10001`), else $RAY_ADDRESS, else the one this process already joined, else a local
+    Ray instance of `workers` CPUs that is stopped again at the end; the store stays on this machine.
+    `resume=True` finishes a campaign already in the store without repeating a trial; a second driver on the
+    same campaign and store is refused (`CampaignBusy`). `sitl=PATH`: every trial on a fresh ArduPilot SITL
+    process (on Ray, PATH as the nodes see it; `sitl=""` there: each node's $PRELAND_SITL_BINARY).
+    `outcomes_only=True`: no event logs and trajectories in the store. `progress(done, total, record)` is
+    called as trials finish. Read the results back with `read_results`."""
+    from .campaign.driver import run_campaign as execute
+    from .campaign.executors import ExecutorOptions, create_executor, executor_factory
     from .campaign.store import ResultsStore
 
     spec = campaign if isinstance(campaign, CampaignSpec) else load_campaign(campaign)
+    trial_executor = create_executor(executor, ExecutorOptions(workers=workers, address=ray_address,
+                                                               trial_cpus=trial_cpus))
     options = None
     if sitl is not None:
         from .runtime.sitl import SitlOptions, resolve_sitl_binary
 
-        options = SitlOptions(binary=resolve_sitl_binary(sitl or None), speedup=sitl_speedup)
+        elsewhere = getattr(executor_factory(executor), "runs_elsewhere", False)
+        binary = (Path(sitl) if sitl else None) if elsewhere else resolve_sitl_binary(sitl or None)
+        options = SitlOptions(binary=binary, speedup=sitl_speedup)
     with ResultsStore(db) as store:
-        ran, total = execute(spec, store, workers=workers, resume=resume, progress=progress, sitl=options)
+        ran, total = execute(spec, store, resume=resume, progress=progress, sitl=options, executor=trial_executor,
+                             outcomes_only=outcomes_only)
     return CampaignRun(name=spec.name, db=Path(db), ran=ran, total=total)
 
 
@@ -136,6 +151,78 @@ def read_results(db: str | os.PathLike, *, campaign: str | None = None) -> list[
         raise PrelandError(f"{db}: no such results database")
     with ResultsStore(db) as store:
         return store.trials(campaign)
+
+
+def _open_existing(db: str | os.PathLike):
+    from .campaign.store import ResultsStore
+
+    if not Path(db).exists():
+        raise PrelandError(f"{db}: no such results database")
+    return ResultsStore(db)
+
+
+def list_campaigns(db: str | os.PathLike) -> list[Any]:
+    """The campaigns in `db`, as `preland campaign list` shows them: `CampaignEntry` (name, source_path,
+    created_at, scenarios: `ScenarioCount` with trials per source `counts`, `landed`, `land_mode`,
+    `published_source`)."""
+    from .campaign.catalog import overview
+
+    with _open_existing(db) as store:
+        return overview(store)
+
+
+def read_trial(db: str | os.PathLike, *, campaign: str, scenario: str, index: int,
+               source: str | None = None) -> dict[str, Any]:
+    """One trial in full (as `read_results` gives it) plus its `events` (vehicle seconds) and `trajectory`
+    ((columns, rows) in s and m, or None). `source` None: the simulated trial of that index, else SITL, else
+    field."""
+    from .campaign.catalog import find_trial
+
+    with _open_existing(db) as store:
+        trial = find_trial(store, campaign, scenario, index, source)
+        return {**trial, "events": store.events(trial["id"]), "trajectory": store.trajectory(trial["id"])}
+
+
+def summarize_campaign(db: str | os.PathLike, campaign: str) -> list[Any]:
+    """Per scenario and source, as the report's table: `ScenarioSummary` with `error_spread()` and
+    `landing_time_spread()` (`Spread`: n, mean, sd, median, minimum, maximum, ci_low, ci_high; cm and s),
+    the published figures (`published_avg_error_cm()`, `published_error_spread()`, ...) and the trials."""
+    from .campaign.report import summarize
+
+    with _open_existing(db) as store:
+        return summarize(store, campaign)
+
+
+def compare_runs(before: tuple[str | os.PathLike, str], after: tuple[str | os.PathLike, str], *,
+                 measure: str = "landing_error_cm") -> list[Any]:
+    """`preland campaign compare`: per scenario, `ScenarioComparison` with `difference` (`Difference`: the
+    two `Spread`s, `difference` of the means after - before, its bootstrap 95 % `ci_low`/`ci_high`,
+    `significant`, `intervals_overlap`). `before`/`after`: (db, campaign)."""
+    from .campaign.compare import compare
+
+    with _open_existing(before[0]) as store_b, _open_existing(after[0]) as store_a:
+        return compare((store_b, before[1]), (store_a, after[1]), measure=measure)
+
+
+def export_results(db: str | os.PathLike, *, table: str = "trials", export_format: str = "csv",
+                   campaign: str | None = None, out: str | os.PathLike | None = None) -> str | None:
+    """`preland campaign export`: `table` trials, events or trajectories as csv, jsonl or parquet (needs
+    pyarrow). Returns the text when `out` is None (csv, jsonl), else writes `out`."""
+    from .campaign.export import export
+
+    with _open_existing(db) as store:
+        return export(store, table=table, export_format=export_format, campaign=campaign,
+                      out=Path(out) if out is not None else None)
+
+
+def write_campaign_report(db: str | os.PathLike, campaign: str, out_dir: str | os.PathLike, *,
+                          figure_format: str = "png", dpi: int | None = None) -> list[Path]:
+    """`preland campaign report`: the table (Markdown, CSV) and figures (png at `dpi`, default 300; pdf; svg)
+    into `out_dir`; returns the files written."""
+    from .campaign.report import write_report
+
+    with _open_existing(db) as store:
+        return write_report(store, campaign, Path(out_dir), figure_format=figure_format, dpi=dpi)
 
 
 def land_modes() -> list[LandModeRow]:
@@ -163,10 +250,16 @@ __all__ = [
     "SpecError",
     "TrialOutcome",
     "fly",
+    "compare_runs",
+    "export_results",
     "land_modes",
+    "list_campaigns",
     "load_campaign",
     "load_mission",
     "read_results",
+    "read_trial",
     "run_campaign",
     "schema",
+    "summarize_campaign",
+    "write_campaign_report",
 ]

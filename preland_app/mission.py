@@ -96,6 +96,10 @@ class MissionRunner:
                 await asyncio.gather(steps, return_exceptions=True)
                 watcher.result()  # raises what the watcher found
             return steps.result()
+        except WaitTimeout as error:
+            # The log shows when and which step ran out of time, as it shows every other ending.
+            self.events.add("timed_out", str(error), operation=error.operation, timeout_s=error.timeout_s)
+            raise
         finally:
             for task in (steps, watcher):
                 if not task.done():

@@ -32,3 +32,32 @@ def test_the_public_api_flies_runs_a_campaign_and_reads_it_back(tmp_path):
         assert error.field == "land.mode" and "no module named" in error.problem
     else:
         raise AssertionError("an unknown land mode must raise SpecError")
+
+
+def test_reading_functions_of_the_api(tmp_path):
+    import json
+
+    import pytest
+
+    import preland_app
+
+    from .test_field_records import seeded_store
+    from .test_store_reading import add_events_and_path
+
+    db = seeded_store(tmp_path / "r.db")
+    add_events_and_path(db)
+    (entry,) = preland_app.list_campaigns(db)
+    assert entry.name == "thesis_table3" and entry.trials == 5
+    trial = preland_app.read_trial(db, campaign="thesis_table3", scenario="IRLock / none", index=2)
+    assert trial["landing_error_cm"] == 5.0 and trial["events"][0]["kind"] == "armed"
+    assert trial["trajectory"][0][0] == "time_s" and len(trial["trajectory"][1]) == 30
+    summaries = preland_app.summarize_campaign(db, "thesis_table3")
+    assert summaries[1].error_spread().n == 3 and summaries[1].published_avg_error_cm() == 5.79
+    (gps, irlock) = preland_app.compare_runs((db, "thesis_table3"), (db, "thesis_table3"))
+    assert gps.difference.difference == 0.0 and irlock.before_n == 3
+    lines = preland_app.export_results(db, export_format="jsonl").splitlines()
+    assert len(lines) == 5 and json.loads(lines[0])["campaign"] == "thesis_table3"
+    files = preland_app.write_campaign_report(db, "thesis_table3", tmp_path / "rep", figure_format="svg")
+    assert {f.suffix for f in files} == {".md", ".csv", ".svg"}
+    with pytest.raises(preland_app.PrelandError):
+        preland_app.list_campaigns(tmp_path / "missing.db")

@@ -11,10 +11,12 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from preland_app.campaign.executor import derive_seed, run_campaign
-from preland_app.campaign.report import export_csv, summarize, write_report
+from preland_app.campaign.driver import run_campaign
+from preland_app.campaign.export import export_csv
+from preland_app.campaign.report import summarize, write_report
+from preland_app.campaign.trials import derive_seed
 from preland_app.campaign.spec import load_campaign
-from preland_app.campaign.store import ResultsStore, TrialRecord
+from preland_app.campaign.store import DuplicateTrial, ResultsStore, TrialRecord
 from preland_app.cli import app
 
 from .conftest import ROOT
@@ -57,7 +59,7 @@ def test_store_round_trip_in_memory():
     assert store.done_keys("c") == {("s", 3)}
     assert store.events(trial_id) == [{"time_s": 1.0, "kind": "armed", "message": "armed", "data": {"x": 1}}]
     assert store.trajectory(trial_id) == (["time_s", "v"], [[0.0, 1.0], [0.5, 2.0]])
-    with pytest.raises(sqlite3.IntegrityError):
+    with pytest.raises(DuplicateTrial, match="trial 3 \\(sim\\) is already in"):
         store.add_trial(record)  # a trial is never stored twice
     assert len(store.trials("c")) == 1
 
@@ -218,7 +220,7 @@ def test_report_and_export(tmp_path):
         pngs = [f for f in files if f.suffix == ".png"]
         assert len(pngs) == 3 and all(f.read_bytes()[:4] == b"\x89PNG" and f.stat().st_size > 10_000 for f in pngs)
         lines = export_csv(store, "quick").strip().splitlines()
-        assert len(lines) == 7 and lines[0].startswith("campaign,scenario")
+        assert len(lines) == 7 and lines[0].startswith("trial_id,campaign,scenario")
 
     result = CliRunner().invoke(app, ["campaign", "export", str(tmp_path / "r.db"), "--format", "csv"])
     assert result.exit_code == 0 and len(result.stdout.strip().splitlines()) == 7
@@ -228,7 +230,7 @@ def test_report_and_export(tmp_path):
     assert result.exit_code == 2 and "no such results database" in result.stderr
 
 
-@pytest.mark.parametrize("name", ["thesis_table3", "thesis_table4", "thesis_table5", "paper_comparison", "smoke"])
+@pytest.mark.parametrize("name", ["thesis_table3", "thesis_table4", "thesis_table5", "thesis_field_fit", "paper_comparison", "smoke"])
 def test_shipped_campaign_files_load(name):
     campaign = load_campaign(ROOT / "campaigns" / f"{name}.yaml")
     assert campaign.name == name and campaign.scenarios

@@ -48,3 +48,22 @@ def test_modes_lists_every_land_mode_with_its_scoring_reference():
     assert lines["normal"][1:4] == ["built-in", "takeoff", "GPS"]
     assert all(lines[m][1:3] == ["built-in", "pad"] for m in precision)
     assert lines["fused"][3] == "fused" and lines["paper_static"][3] == "marker"
+
+
+def test_fly_wind_overrides():
+    import json
+
+    runner = CliRunner()
+    mission = str(THESIS_MISSION)
+    calm = runner.invoke(app, ["fly", mission, "--json", "--seed", "4", "--wind-m-s", "0", "--wind-from-deg", "90"])
+    assert calm.exit_code == 0, calm.output
+    windy = runner.invoke(app, ["fly", mission, "--json", "--seed", "4", "--wind-m-s", "8", "--wind-from-deg", "90"])
+    calm, windy = json.loads(calm.stdout), json.loads(windy.stdout)
+    assert calm["details"]["wind_from_deg"] == windy["details"]["wind_from_deg"] == 90.0
+    assert calm["landing_error_cm"] != windy["landing_error_cm"]
+    result = runner.invoke(app, ["fly", mission, "--wind-m-s", "-1"])
+    assert result.exit_code == 2 and "--wind-m-s" in result.stderr
+    result = runner.invoke(app, ["fly", mission, "--wind-from-deg", "400"])
+    assert result.exit_code == 2 and "--wind-from-deg" in result.stderr
+    result = runner.invoke(app, ["fly", mission, "--wind-m-s", "3", "--connect", "udp://:14550"])
+    assert result.exit_code == 2 and "real one" in result.stderr

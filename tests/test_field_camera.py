@@ -118,3 +118,33 @@ async def _open_missing():
     VideoFileSource(path="/nonexistent.mkv", clock=LoopClock())
 
 
+
+
+def test_detect_writes_a_row_per_frame_and_warns_on_a_calibration_of_another_size(tmp_path):
+    import csv
+
+    path = tmp_path / "descent.mkv"
+    recorder = VideoRecorder(path=path, frame_rate_hz=30.0, size=(640, 480))
+    for image in _descent_frames(6):
+        recorder.write(image)
+    recorder.close()
+    table = tmp_path / "frames.csv"
+    result = CliRunner().invoke(app, ["detect", "--video", str(path), "--csv", str(table)])
+    assert result.exit_code == 0, result.output
+    assert "warning" not in result.stderr
+    rows = list(csv.DictReader(table.open()))
+    assert [int(r["frame"]) for r in rows] == list(range(6))
+    detector = MarkerDetector(pad=THESIS_PAD, camera=RPI_CAMERA_V2_640X480)
+    for row, image in zip(rows, _descent_frames(6)):
+        found = detector.detect(image)
+        assert int(row["markers"]) == len(found) and float(row["latency_ms"]) > 0
+        if found:
+            chosen = min(found, key=lambda d: d.side_m)
+            assert int(row["chosen_id"]) == chosen.marker_id
+            assert float(row["pad_z_m"]) == pytest.approx(chosen.pad_center_cam_m[2], abs=1e-3)
+    calibration = tmp_path / "calib.yaml"
+    calibration.write_text("camera_matrix: [[800, 0, 640], [0, 800, 360], [0, 0, 1]]\ndist_coeffs: [0, 0, 0, 0, 0]\n"
+                           "image_width: 1280\nimage_height: 720\n")
+    result = CliRunner().invoke(app, ["detect", "--video", str(path), "--calibration", str(calibration)])
+    assert result.exit_code == 0, result.output
+    assert "warning" in result.stderr and "1280x720" in result.stderr and "640x480" in result.stderr

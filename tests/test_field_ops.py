@@ -34,7 +34,7 @@ class BlankCamera:
 
 
 def _preflight(mission, *, seed=1, mode="normal", prepare=None, frame_source=None):
-    served = ServedSimulator(mission, seed=seed, speedup=4.0)
+    served = ServedSimulator(mission, seed=seed, speedup=8.0)
     if prepare is not None:
         prepare(served.simulator)
     try:
@@ -170,17 +170,17 @@ def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(the
     mission_path.write_text(text.replace("  mode: normal", "  mode: marker").replace(
         "pad:\n", "params:\n  PLND_ENABLED: 1\n  PLND_TYPE: 1\npad:\n").replace(
         "preset: thesis", "preset: thesis"))
-    # 2x wall speed: the camera renders, detects and records 60 frames per wall second, which a loaded
+    # 3x wall speed: the camera renders, detects and records 90 frames per wall second, which a loaded
     # 2-core machine still keeps up with (the preflight refuses a camera below 80 % of its rate).
-    served = ServedSimulator(thesis_mission, seed=2, speedup=2.0)
+    served = ServedSimulator(thesis_mission, seed=2, speedup=3.0)
     served.simulator.params.set("PLND_ENABLED", 1)
     served.simulator.params.set("PLND_TYPE", 1)
     db, log, video = tmp_path / "field.db", tmp_path / "detections.csv", tmp_path / "flight.mkv"
     try:
         result = CliRunner().invoke(app, [
             "fly", str(mission_path), "--connect", served.url, "--detections-log", str(log), "--record-video",
-            str(video), "--record-to", str(db), "--campaign", "field_day", "--scenario", "Marker / none", "--json",
-        ], input="7.5\n5\n-5.5\n")
+            str(video), "--record-to", str(db), "--campaign", "field_day", "--scenario", "Marker / none", "--new",
+            "--json"], input="7.5\n5\n-5.5\n")
     finally:
         served.stop()
     assert result.exit_code == 0, result.output

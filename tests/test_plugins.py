@@ -8,7 +8,7 @@ import textwrap
 import pytest
 from typer.testing import CliRunner
 
-from preland_app.campaign.executor import run_campaign
+from preland_app.campaign.driver import run_campaign
 from preland_app.campaign.spec import load_campaign
 from preland_app.campaign.store import ResultsStore
 from preland_app.cli import app

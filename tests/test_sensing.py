@@ -89,7 +89,8 @@ def test_thesis_pad_has_a_marker_in_view_from_ten_metres_to_the_ground():
 
 
 def test_irlock_sees_the_beacon_only_inside_its_cone_and_field_of_view():
-    model = IrLockModel(spec=IrLockSpec(noise_sigma_deg=0.0), beacon_ned_m=PAD_AT, rng=np.random.default_rng(0))
+    exact = IrLockSpec(noise_sigma_deg=0.0, quantize=False, mount_offset_frd_m=(0.0, 0.0, 0.0))
+    model = IrLockModel(spec=exact, beacon_ned_m=PAD_AT, rng=np.random.default_rng(0))
     above = model.read(_pose(height_m=10.0, north_off_m=-1.0), capture_time_s=1.0)
     assert above is not None and above.distance_m is None
     true_x, true_y = _true_angles_deg(_pose(height_m=10.0, north_off_m=-1.0), (*PAD_AT, 0.0))
@@ -208,3 +209,58 @@ def test_printable_pad_is_true_scale(tmp_path):
     assert result.exit_code == 0 and pdf.read_bytes().startswith(b"%PDF")
     result = CliRunner().invoke(app, ["pad", "render", "--preset", "nope", "--out", str(out)])
     assert result.exit_code == 2 and "--preset" in result.stderr
+
+
+def test_pad_render_tiles_onto_paper_pages_that_cover_the_sheet(tmp_path):
+    from PIL import Image
+    from typer.testing import CliRunner
+
+    from preland_app.cli import app
+    from preland_app.sensing.pad_render import PAGE_MARGIN_M, PAPER_SIZES_M, plan_tiles
+
+    page, tiles = plan_tiles(0.80, "A4")
+    assert len(tiles) == len({(t.row, t.column) for t in tiles})
+    area = sum((t.x1_m - t.x0_m) * (t.y1_m - t.y0_m) for t in tiles)
+    assert area == pytest.approx(0.64) and min(t.x0_m for t in tiles) == pytest.approx(-0.4)
+    assert max(t.y1_m for t in tiles) == pytest.approx(0.4)
+    width, height = sorted(page)
+    assert (width, height) == PAPER_SIZES_M["A4"]
+    for t in tiles:  # every tile fits the page inside its printable margin
+        assert t.x1_m - t.x0_m <= page[0] - 2 * PAGE_MARGIN_M and t.y1_m - t.y0_m <= page[1] - 2 * PAGE_MARGIN_M
+    out = tmp_path / "pad.png"
+    result = CliRunner().invoke(app, ["pad", "render", "--preset", "thesis", "--paper", "A4", "--out", str(out),
+                                      "--dpi", "20"])
+    assert result.exit_code == 0, result.output
+    files = sorted(tmp_path.glob("pad_r*c*.png"))
+    assert len(files) == len(tiles) and f"{len(tiles)} A4 pages" in result.stdout
+    with Image.open(files[0]) as image:
+        assert image.size[0] == pytest.approx(page[0] / 0.0254 * 20, abs=1)  # A4 at 20 dpi (true size)
+        assert image.size[1] == pytest.approx(page[1] / 0.0254 * 20, abs=1)
+    pdf = tmp_path / "pad.pdf"
+    assert CliRunner().invoke(app, ["pad", "render", "--preset", "thesis", "--paper", "A3", "--out", str(pdf),
+                                    "--dpi", "20"]).exit_code == 0
+    data = pdf.read_bytes()
+    assert len(plan_tiles(0.80, "A3")[1]) == data.count(b"/Type /Page") - data.count(b"/Type /Pages")
+    result = CliRunner().invoke(app, ["pad", "render", "--preset", "thesis", "--paper", "Letter", "--out", str(pdf)])
+    assert result.exit_code == 2 and "--paper" in result.stderr
+
+
+def test_charuco_board_render_is_true_scale_and_detected_whole(tmp_path):
+    import cv2
+    from typer.testing import CliRunner
+
+    from preland_app.cli import app
+    from preland_app.sensing.calibration import CharucoBoardSpec
+
+    out = tmp_path / "board.png"
+    result = CliRunner().invoke(app, ["camera", "board", "--out", str(out), "--dpi", "100"])
+    assert result.exit_code == 0, result.output
+    image = cv2.imread(str(out), cv2.IMREAD_GRAYSCALE)
+    spec = CharucoBoardSpec()
+    corners, ids, _, _ = cv2.aruco.CharucoDetector(spec.board()).detectBoard(image)
+    assert ids is not None and len(ids) == (spec.squares_x - 1) * (spec.squares_y - 1)
+    by_id = {int(i): c for i, c in zip(ids.ravel(), corners.reshape(-1, 2))}
+    square_px = spec.square_m / 0.0254 * 100
+    assert abs(by_id[1][0] - by_id[0][0]) == pytest.approx(square_px, rel=0.01)  # 4 cm at 100 dpi
+    result = CliRunner().invoke(app, ["camera", "board", "--out", str(out), "--dictionary", "DICT_9X9"])
+    assert result.exit_code == 2 and "--dictionary" in result.stderr

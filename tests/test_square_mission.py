@@ -38,7 +38,9 @@ def test_true_path_is_a_square_of_two_metre_legs(square_trial):
         row = np.argmin(np.abs(track[:, COL["time_s"]] - t))
         true_points.append((track[row, COL["true_north_m"]], track[row, COL["true_east_m"]]))
     legs = [math.dist(a, b) for a, b in zip(true_points, true_points[1:])]
-    assert legs == pytest.approx([2.0] * 4, abs=0.3)
+    # A waypoint counts as reached within 0.2 m of it (estimate), so each end of a leg may fall up to
+    # 0.2 m short, and the GPS error drifts a little during the leg.
+    assert legs == pytest.approx([2.0] * 4, abs=0.45)
     # Directions: south, east, north, west (the square turns away from the pad, which is north).
     headings = [math.degrees(math.atan2(b[1] - a[1], b[0] - a[0])) % 360 for a, b in zip(true_points, true_points[1:])]
     assert headings == pytest.approx([180, 90, 0, 270], abs=15)

@@ -1,1 +1,1 @@
-"""Campaigns: spec files, repeated trials in worker processes, a durable SQLite store, reports."""
+"""Campaigns: spec files, repeated trials on an executor (local processes, Ray), a durable SQLite store, reports."""

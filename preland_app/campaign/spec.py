@@ -17,25 +17,26 @@ from pathlib import Path
 from typing import Any
 
 from ..config.loader import build, load_spec_file
-from ..config.mission import FAULTS_SCHEMA, HASH_WHEN_SET, PARAMS_SCHEMA, MissionSpec, load_mission
+from ..config.mission import FAULTS_SCHEMA, HASH_NEVER, HASH_WHEN_SET, PARAMS_SCHEMA, MissionSpec, load_mission
 from ..errors import SpecError, SpecValueError, require
 from ..sim.spec import EnvironmentSpec
 
 
 @dataclass(frozen=True)
 class ReferenceSpec:
-    """Published figures for a scenario: mean and max landing error in cm, mean landing time in s, and
+    """Published figures for a scenario: mean, min and max landing error in cm, mean landing time in s, and
     optionally the published trials (a CSV like the thesis' field trials, filtered by `source_table`)."""
 
     avg_error_cm: float | None = None
     max_error_cm: float | None = None
+    min_error_cm: float | None = field(default=None, metadata=HASH_WHEN_SET)
     avg_landing_time_s: float | None = None
     source: str = ""
     trials_csv: str | None = None
     source_table: int | None = None
 
     def __post_init__(self) -> None:
-        for name in ("avg_error_cm", "max_error_cm", "avg_landing_time_s"):
+        for name in ("avg_error_cm", "max_error_cm", "min_error_cm", "avg_landing_time_s"):
             value = getattr(self, name)
             require(value is None or value >= 0, name, "must be >= 0")
         require((self.trials_csv is None) == (self.source_table is None), "source_table",
@@ -67,7 +68,8 @@ class ScenarioSpec:
 
 @dataclass(frozen=True)
 class CampaignSpec:
-    """A campaign. `mission` is a mission file relative to the campaign file; `pad` overrides its pad preset."""
+    """A campaign. `mission` is a mission file relative to the campaign file; `pad` overrides its pad preset;
+    `sim_profile`: a simulation profile file (relative to the campaign) taking the place of the mission's."""
 
     name: str
     mission: str
@@ -76,6 +78,7 @@ class CampaignSpec:
     base_seed: int = 0
     description: str = ""
     pad: str | None = None
+    sim_profile: str | None = field(default=None, metadata=HASH_NEVER)
     source_path: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -120,7 +123,7 @@ def _deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any
 def _hashed(value: Any, spec_field: dataclasses.Field) -> bool:
     """Whether a field enters a spec's plain form: not `source_path`, and not a field added after 0.1 while
     it keeps its default (HASH_WHEN_SET), so that stores made before it still resume."""
-    if spec_field.name == "source_path":
+    if spec_field.name == "source_path" or spec_field.metadata.get("hash") == "never":
         return False
     if spec_field.metadata.get("hash") == "when-set":
         default = (spec_field.default_factory() if spec_field.default_factory is not dataclasses.MISSING
@@ -187,7 +190,15 @@ def load_campaign_mission(campaign: CampaignSpec) -> MissionSpec:
         mission_path = campaign.base_dir / mission_path
     if not mission_path.exists():
         raise SpecError(path=campaign.source_path, field="mission", problem=f"unknown mission: {mission_path} not found")
-    return load_mission(mission_path)
+    profile = None
+    if campaign.sim_profile is not None:
+        from ..sim.profile import load_profile, resolve_profile_path
+
+        try:
+            profile = load_profile(resolve_profile_path(campaign.sim_profile, relative_to=campaign.base_dir))
+        except SpecError as error:
+            raise SpecError(path=campaign.source_path, field="sim_profile", problem=str(error)) from None
+    return load_mission(mission_path, profile=profile)
 
 
 def load_campaign(path: str | Path) -> CampaignSpec:

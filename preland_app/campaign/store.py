@@ -29,6 +29,7 @@ from typing import Any
 
 from .. import __version__
 from ..errors import PrelandError
+from .migrations import migrate
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS campaigns (
@@ -93,6 +94,10 @@ class StoreError(PrelandError):
     """The results store cannot be used as asked."""
 
 
+class DuplicateTrial(StoreError):
+    """The store already holds this trial (campaign, scenario, trial index, source)."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class TrialRecord:
     """Everything one trial stores. `result` holds the outcome fields (see OUTCOME_COLUMNS) and `details`."""
@@ -125,6 +130,7 @@ class ResultsStore:
                 self.db.execute("PRAGMA journal_mode = WAL")
                 self.db.execute("PRAGMA synchronous = NORMAL")
             self.db.executescript(SCHEMA)
+            migrate(self.db)
         except sqlite3.DatabaseError as error:
             raise StoreError(f"{self.path}: not a usable results database ({error})") from None
 
@@ -166,6 +172,16 @@ class ResultsStore:
         """Store one finished trial with its events and trajectory, in one transaction."""
         result = record.result
         values = [result.get(column) for column in OUTCOME_COLUMNS]
+        try:
+            return self._insert_trial(record, values)
+        except sqlite3.IntegrityError as error:
+            if "UNIQUE" not in str(error):
+                raise
+            raise DuplicateTrial(f"campaign {record.campaign!r}, scenario {record.scenario!r}, trial "
+                                 f"{record.trial_index} ({record.source}) is already in {self.path}") from None
+
+    def _insert_trial(self, record: TrialRecord, values: list[Any]) -> int:
+        result = record.result
         with self._transaction() as db:
             cursor = db.execute(
                 f"""INSERT INTO trials (campaign, scenario, scenario_index, trial_index, seed,
@@ -222,6 +238,7 @@ class ResultsStore:
         for row in self.db.execute(query + " ORDER BY campaign, scenario_index, source DESC, trial_index", args):
             data = dict(row)
             data["details"] = json.loads(data["details"] or "{}")
+            data["audit"] = json.loads(data.get("audit") or "[]")
             rows.append(data)
         return rows
 

@@ -12,7 +12,7 @@ import math
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import SpecError, SpecValueError, require
 from ..field.preflight import PreflightSpec
@@ -28,7 +28,10 @@ from ..sim.params import ARDUCOPTER_PARAMS
 from ..sensing.pad import PAD_PRESETS, PadSpec, load_pad
 from ..sensing.spec import SensorsSpec
 from ..sim.spec import EnvironmentSpec
-from .loader import load_spec_file
+from .loader import build, read_yaml_mapping
+
+if TYPE_CHECKING:
+    from ..sim.profile import ProfileSpec
 
 _MAX_ALTITUDE_M = 120.0  # the usual legal ceiling for small drones
 
@@ -102,6 +105,8 @@ class PathSpec:
 # Fields added after 0.1 leave a spec's hash as it was while they keep their default, so stored campaigns
 # still resume (campaign/spec.py: spec_hash).
 HASH_WHEN_SET = {"hash": "when-set"}
+# Where a value came from, not what it is: never hashed (a profile's values are, through the sections it fills).
+HASH_NEVER = {"hash": "never"}
 # What the JSON Schema (config/schema.py) says beyond the types: the keys these mappings take.
 FAULTS_SCHEMA = {"schema": {"propertyNames": {"enum": list(FAULT_SENSORS)}}}
 PARAMS_SCHEMA = {"schema": {"propertyNames": {"enum": sorted(ARDUCOPTER_PARAMS)}}}
@@ -212,7 +217,9 @@ class GeofenceSpec:
 
 @dataclass(frozen=True)
 class MissionSpec:
-    """A whole mission. `params` are autopilot parameters (ArduPilot names and units) set before arming."""
+    """A whole mission. `params` are autopilot parameters (ArduPilot names and units) set before arming.
+    `sim_profile`: a simulation profile file (relative to the mission) whose overrides the mission's own
+    `environment:` and `sensors:` apply on top of."""
 
     name: str
     takeoff: TakeoffSpec
@@ -227,6 +234,7 @@ class MissionSpec:
     preflight: PreflightSpec = field(default_factory=PreflightSpec)
     params: dict[str, float] = field(default_factory=dict, metadata=PARAMS_SCHEMA)
     initial_yaw_deg: float = 0.0
+    sim_profile: str | None = field(default=None, metadata=HASH_NEVER)
     source_path: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -234,6 +242,12 @@ class MissionSpec:
                 "must be a non-empty word (letters, digits, _ . -)")
         for name in self.params:
             require(name in ARDUCOPTER_PARAMS, f"params.{name}", "unknown autopilot parameter")
+        options = self.params.get("PLND_OPTIONS")
+        # Bit 1 changes what happens after a pilot repositions the vehicle with the sticks; no mission has
+        # a pilot on the sticks, so the bit could only be carried and never act.
+        require(options is None or int(options) & 2 == 0, "params.PLND_OPTIONS",
+                "bit 1 (precision landing after manual reposition) needs a pilot's sticks, which preland's "
+                "missions never use; bits 0 (moving target) and 2 (fast final descent) are supported")
 
     def takeoff_altitude_rel_m(self) -> float:
         return self.takeoff.altitude_for(self.land.mode, self.land.precision_sensor)
@@ -262,10 +276,30 @@ class MissionSpec:
                                           faults=faults if faults is not None else dict(land.faults)))
 
 
-def load_mission(path: str | Path) -> MissionSpec:
-    """Load and validate a mission YAML file. Raises SpecError naming file and field."""
+def load_mission(path: str | Path, *, profile: "ProfileSpec | None" = None) -> MissionSpec:
+    """Load and validate a mission YAML file. Raises SpecError naming file and field. `profile` takes the
+    place of the profile the mission names (a campaign's, or a candidate during calibration)."""
+    from ..sim.profile import deep_merge, load_profile, resolve_profile_path
+
     path_text = str(path)
-    spec = load_spec_file(MissionSpec, path)
+    data = read_yaml_mapping(path)
+    if "source_path" in data:
+        raise SpecError(path=path_text, field="source_path", problem="unknown key")
+    if profile is None and data.get("sim_profile") is not None:
+        if not isinstance(data["sim_profile"], str):
+            raise SpecError(path=path_text, field="sim_profile", problem=f"expected a string, got {data['sim_profile']!r}")
+        profile_path = resolve_profile_path(data["sim_profile"], relative_to=Path(path).parent)
+        try:
+            profile = load_profile(profile_path)
+        except SpecError as error:
+            raise SpecError(path=path_text, field="sim_profile", problem=str(error)) from None
+    if profile is not None:
+        for section in ("environment", "sensors"):
+            own = data.get(section, {})
+            if isinstance(own, dict):  # anything else is reported by the loader as the mission's mistake
+                data[section] = deep_merge(getattr(profile, section), own)
+        data["sim_profile"] = profile.source_path or profile.name
+    spec = replace(build(MissionSpec, data, path=path_text), source_path=path_text)
     # Resolve referenced files now, so a bad pad or calibration file is reported at load time.
     try:
         spec.pad_spec()

@@ -229,7 +229,15 @@ class DetectorView:
 
     def detect(self, image: np.ndarray) -> list[MarkerDetection]:
         detector, faults = _TARGETS[self]
-        detections = detector.detect(image)
+        return self._admitted(detector.detect(image), faults)
+
+    def detect_frame(self, frame: Frame) -> list[MarkerDetection]:
+        """`detect` on a camera frame: a virtual camera then draws only the part the detector reads."""
+        detector, faults = _TARGETS[self]
+        return self._admitted(detector.detect_frame(frame), faults)
+
+    @staticmethod
+    def _admitted(detections: list[MarkerDetection], faults: SensorFaults | None) -> list[MarkerDetection]:
         if detections and faults is not None and not faults.admit("marker"):
             return []
         return detections
@@ -304,7 +312,7 @@ class SensorView:
         frame = await camera.next_frame()
         if frame is None:
             return None
-        detections = detector.detect(frame.image)
+        detections = detector.detect_frame(frame)
         latency_s = self.spec.marker.processing_latency_s
         if latency_s > 0:
             await clock.sleep(latency_s)

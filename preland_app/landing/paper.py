@@ -32,7 +32,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..clock import wait_until
-from ..errors import require
+from ..errors import WaitTimeout, require
 from ..sensing.faults import FaultInjector, FaultSpec
 from ..sensing.marker import MarkerDetection
 from ..vehicle.types import FlightMode
@@ -229,7 +229,7 @@ class PaperLanding:
             frame = await camera.next_frame()
             if frame is None:
                 raise MissingSensor(f"{self.name}: the camera stopped delivering frames")
-            detections = detector.detect(frame.image)
+            detections = detector.detect_frame(frame)
             if latency_s > 0:
                 await clock.sleep(latency_s)
             self.frames += 1
@@ -254,7 +254,8 @@ class PaperLanding:
                                    f"no marker for {spec.abort_after_s:g} s: plain GPS landing")
                 break
             if now_s >= deadline_s:
-                break  # the wait below reports the timeout
+                raise WaitTimeout(operation="land", timeout_s=context.timeout_s,
+                                  last_state=f"land mode {self.name} still running at {altitude_m:.2f} m")
             switches_before = len(self.policy.switches)
             climbs_before = self.policy.recovery_climbs
             command = self.policy.step(detections, altitude_m=altitude_m, time_s=now_s)
@@ -274,9 +275,14 @@ class PaperLanding:
         async def disarmed() -> bool:
             return not (await vehicle.telemetry()).armed
 
-        remaining_s = max(1.0, deadline_s - clock.now_s())
-        await wait_until(disarmed, clock=clock, timeout_s=remaining_s, operation="land",
-                         poll_period_s=context.poll_period_s)
+        # What is left of the land timeout; a timeout names the whole of it, not the remainder.
+        remaining_s = max(0.0, deadline_s - clock.now_s())
+        try:
+            await wait_until(disarmed, clock=clock, timeout_s=remaining_s, operation="land",
+                             poll_period_s=context.poll_period_s)
+        except WaitTimeout:
+            raise WaitTimeout(operation="land", timeout_s=context.timeout_s,
+                              last_state="LAND commanded, not yet disarmed") from None
         context.events.add("disarmed", "landed and disarmed")
         return LandingReport(details={
             "marker_switches": len(self.policy.switches),

@@ -230,7 +230,7 @@ class PrecisionLanding:
             frame = await camera.next_frame()
             if frame is None:
                 return
-            detections = detector.detect(frame.image)
+            detections = detector.detect_frame(frame)
             # The reading is ready only after the companion has processed the frame.
             if latency_s > 0:
                 await context.clock.sleep(latency_s)

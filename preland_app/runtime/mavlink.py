@@ -130,15 +130,16 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     recording = asyncio.ensure_future(recorder.run())
     listener = None
     if fault_listen is not None:
-        def on_fault_command(fault_command: FaultCommand) -> None:
+        def on_fault_command(fault_command: FaultCommand) -> bool:
             apply = getattr(strategy, "apply_fault_command", None)
             if apply is None:
                 events.add("fault_command", f"ignored: land mode {strategy.name!r} takes no faults")
-                return
+                return False
             apply(fault_command)
             events.add("fault_command", f"faults now {', '.join(f'{k} {v}' for k, v in fault_command.faults().items())}",
                        target=int(fault_command.target), r_drop=fault_command.r_drop, p_keep=fault_command.p_keep,
                        p_drop=fault_command.p_drop)
+            return True
 
         listener = await listen(fault_listen, on_fault_command)
     outcome, message = Outcome.LANDED, Outcome.LANDED.description

@@ -26,7 +26,7 @@ import signal
 import socket
 import subprocess
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..config.mission import MissionSpec
@@ -48,6 +48,14 @@ COPTER_DEFAULTS_IN_TREE = Path("Tools") / "autotest" / "default_params" / "copte
 # ArduPilot SITL's rangefinder type (AP_RangeFinder::Type::SIM) and downward orientation (ROTATION_PITCH_270).
 RNGFND_TYPE_SIM = 100
 RNGFND_ORIENT_DOWN = 25
+SIM_WIND_T_NO_LIMIT = 1  # SITL's WindLimitType: the same mean wind at every height
+# --speedup when none is given (benchmarks/sitl_vs_embedded.py): the companion runs in wall time while SITL
+# runs SPEEDUP times faster, so a land mode that renders and reads camera frames processes fewer of them
+# per vehicle second as the speedup grows (on 2 cores: 15.5 Hz at 2x as on the embedded simulator, 9.3 Hz
+# at 10x), and with dropped values ArduPilot's 2 s precision-landing initialisation then fails; sensors
+# without frames (IR-LOCK, GPS) keep their rate at 10x.
+SPEEDUP_CAMERA = 2.0
+SPEEDUP_NO_CAMERA = 10.0
 GPS_UPDATE_PERIOD_S = 2.0  # vehicle seconds between SIM_GPS_GLITCH updates (the error wanders over ~10 s)
 METRES_PER_DEG_LAT = 111_319.49  # WGS-84 equatorial, as ArduPilot's LATLON_TO_M
 
@@ -84,41 +92,58 @@ def find_copter_defaults(binary: Path) -> Path | None:
 
 @dataclass(frozen=True)
 class SitlOptions:
-    """How to run SITL: the binary, its --speedup, extra --defaults files (after the copter defaults), extra
-    parameters, a folder for one .tlog per trial (None: no logs), and a UDP address for the thesis' fault
-    command (None: none)."""
+    """How to run SITL: the binary (None: $PRELAND_SITL_BINARY of the machine a trial runs on, as cluster
+    nodes each have their own), its --speedup (None: SPEEDUP_CAMERA for a land mode that reads camera
+    frames, else SPEEDUP_NO_CAMERA), extra --defaults files (after the copter defaults), extra parameters,
+    a folder for one .tlog per trial (None: no logs), and a UDP address for the thesis' fault command
+    (None: none)."""
 
-    binary: Path
-    speedup: float = 10.0
+    binary: Path | None
+    speedup: float | None = None
     defaults: tuple[Path, ...] = ()
     extra_params: dict[str, float] = field(default_factory=dict)
     tlog_dir: Path | None = None
     fault_listen: str | None = None
 
+    def speedup_for(self, *, uses_camera: bool) -> float:
+        """The --speedup of a trial whose land mode does (or does not) read camera frames."""
+        if self.speedup is not None:
+            return self.speedup
+        return SPEEDUP_CAMERA if uses_camera else SPEEDUP_NO_CAMERA
+
     def defaults_files(self) -> tuple[Path, ...]:
         """copter.parm of the binary's ArduPilot tree (else the packaged copy), then the user's files."""
         return (find_copter_defaults(self.binary) or PACKAGED_DEFAULTS, *self.defaults)
 
+    def on_this_machine(self) -> "SitlOptions":
+        """These options with the binary checked here: the one given, else this machine's
+        $PRELAND_SITL_BINARY (SitlError when neither can be used)."""
+        return replace(self, binary=resolve_sitl_binary(self.binary))
+
 
 def sim_params(mission: MissionSpec, seed: int) -> dict[str, float]:
-    """The scenario's wind as ArduPilot SITL parameters: SIM_WIND_SPD (m/s), SIM_WIND_DIR (deg) and
-    SIM_WIND_TURB (m/s).
+    """The scenario's wind as ArduPilot SITL parameters: SIM_WIND_SPD (m/s), SIM_WIND_DIR (deg, from),
+    SIM_WIND_T and SIM_WIND_TURB (m/s).
+
+    SIM_WIND_T 1 (no height profile): SITL's default (0, square law) scales the mean wind by
+    sqrt(height / SIM_WIND_T_ALT) below SIM_WIND_T_ALT (60 m), so at the thesis' 10 m it would blow at
+    41 % of the scenario's speed and near the ground at about 13 %; the embedded model's steady wind is
+    the same at every height, and so is the scenario's. A scenario without a direction gets the one the
+    embedded simulator draws for the same seed (the first draw of the seed's `wind` stream).
 
     SITL's turbulence is a horizontal gust whose standard deviation is SIM_WIND_TURB (its IIR filter,
     coefficient 0.98, is scaled to match), at any height; preland passes the embedded model's horizontal
     gust standard deviation (Dryden sigma_u) at 10 m, the thesis' flight height. The two spectra differ:
-    SITL's gust is far whiter and changes direction every step.
+    SITL's gust turns to a random direction at every physics step, so its push mostly averages out.
     """
-    import numpy as np
-
     from ..sim.environment import dryden_scales
 
     wind = mission.environment.wind
     direction = wind.direction_from_deg
     if direction is None:
-        direction = float(np.random.default_rng(seed).uniform(0.0, 360.0))
+        direction = float(child_rng(seed, "wind").uniform(0.0, 360.0))
     _, _, sigma_u_m_s, _ = dryden_scales(altitude_m=10.0, w20_m_s=wind.turbulence_w20_m_s)
-    return {"SIM_WIND_SPD": wind.speed_m_s, "SIM_WIND_DIR": direction,
+    return {"SIM_WIND_SPD": wind.speed_m_s, "SIM_WIND_DIR": direction, "SIM_WIND_T": SIM_WIND_T_NO_LIMIT,
             "SIM_WIND_TURB": round(sigma_u_m_s, 3)}
 
 
@@ -168,13 +193,17 @@ class GpsErrorDriver:
         while not vehicle.connected:
             await asyncio.sleep(0.05)
         clock = vehicle.clock
-        last_s = clock.now_s()
+        next_s = clock.now_s() + GPS_UPDATE_PERIOD_S
         while True:
-            await clock.sleep(GPS_UPDATE_PERIOD_S)
-            now_s = clock.now_s()
-            for name, value in self.step(max(now_s - last_s, 0.0)).items():
+            await clock.sleep(max(next_s - clock.now_s(), 0.0))
+            # Fixed steps on a vehicle-time grid: the same seed gives the same error sequence however late
+            # the link delivers the vehicle's time.
+            params = self.params()
+            while clock.now_s() >= next_s:
+                params = self.step(GPS_UPDATE_PERIOD_S)
+                next_s += GPS_UPDATE_PERIOD_S
+            for name, value in params.items():
                 await vehicle.set_param(name, value)
-            last_s = now_s
             self.updates += 1
 
 
@@ -302,6 +331,7 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE). SITL ending during
     the trial ends it with outcome `error` naming how SITL ended."""
     mission = request.resolved_mission()
+    options = replace(options, speedup=options.speedup_for(uses_camera=mission.land.strategy().uses_marker))
     gps = GpsErrorDriver(spec=mission.environment.navigation, seed=request.seed,
                          latitude_deg=DEFAULT_HOME.latitude_deg)
     params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **rangefinder_params(mission), **sim_params(mission, request.seed),

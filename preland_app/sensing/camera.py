@@ -149,9 +149,20 @@ class Frame:
     capture_time_s: float
     index: int = 0
 
+    @property
+    def size_px(self) -> tuple[int, int]:
+        """(width, height) in px."""
+        return self.image.shape[1], self.image.shape[0]
+
+    def region(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+        """The pixels in columns x0..x1 and rows y0..y1 (px, ends exclusive), as a contiguous image."""
+        return np.ascontiguousarray(self.image[y0:y1, x0:x1])
+
 
 class FrameSource(Protocol):
-    """Anything that yields frames: the virtual camera, an OpenCV capture, a video file."""
+    """Anything that yields frames: the virtual camera, an OpenCV capture, a video file. A frame has
+    `image`, `capture_time_s`, `index`, `size_px` and `region()` (the virtual camera's frames draw their
+    pixels only when `image` or `region()` is read)."""
 
     camera: CameraModel
 

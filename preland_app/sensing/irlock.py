@@ -31,7 +31,14 @@ class BeaconShape(enum.Enum):
 @dataclass(frozen=True)
 class IrLockSpec:
     """IR-LOCK defaults: 50 Hz (thesis Section 3.4), beacon seen within 15 m height (MarkOne,
-    SIM_PLD_ALT_LMT) and, at that height, 10 m sideways (SIM_PLD_DIST_LMT, cone)."""
+    SIM_PLD_ALT_LMT) and, at that height, 10 m sideways (SIM_PLD_DIST_LMT, cone).
+
+    `pixels`: the Pixy's block output grid (320 x 200, Charmed Labs); a reading is the block's
+    integer pixel centre turned into angles with the IR-LOCK driver's scale (60 x 35 deg over that
+    grid, `driver_fov_deg`, as ArduPilot's and PX4's irlock drivers convert); `quantize` False gives
+    exact angles. `latency_s`: how old the pose a reading describes is when it is read (one Pixy
+    frame, 20 ms: the Pixy reports the frame it finished processing). `mount_offset_frd_m`: the
+    sensor's position from the vehicle's centre (body FRD, m)."""
 
     rate_hz: float = 50.0
     fov_x_deg: float = 60.0
@@ -40,13 +47,22 @@ class IrLockSpec:
     dist_limit_m: float = 10.0
     shape: BeaconShape = BeaconShape.CONE
     noise_sigma_deg: float = 0.15
-    mount_offset_frd_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # Thesis Fig. 14b: IR-LOCK (left) and camera side by side at the frame's centre; with the Pixy board
+    # 53 mm wide and the camera board 25 mm, the pair centred puts the Pixy's lens 12.5 mm left.
+    mount_offset_frd_m: tuple[float, float, float] = (0.0, -0.0125, 0.0)
+    pixels: tuple[int, int] = (320, 200)
+    driver_fov_deg: tuple[float, float] = (60.0, 35.0)
+    quantize: bool = True
+    latency_s: float = 0.02
 
     def __post_init__(self) -> None:
         require(0 < self.rate_hz <= 400, "rate_hz", "must be within 0..400 Hz")
         require(0 < self.fov_x_deg < 180 and 0 < self.fov_y_deg < 180, "fov_x_deg", "must be within 0..180 deg")
         require(self.alt_limit_m > 0 and self.dist_limit_m > 0, "alt_limit_m", "limits must be > 0 m")
         require(self.noise_sigma_deg >= 0, "noise_sigma_deg", "must be >= 0")
+        require(self.pixels[0] >= 1 and self.pixels[1] >= 1, "pixels", "must be >= 1")
+        require(all(0 < f < 180 for f in self.driver_fov_deg), "driver_fov_deg", "must be within 0..180 deg")
+        require(0 <= self.latency_s <= 1.0, "latency_s", "must be within 0..1 s")
 
 
 class IrLockModel:
@@ -59,6 +75,9 @@ class IrLockModel:
         self._half_fov_x = math.radians(spec.fov_x_deg) / 2.0
         self._half_fov_y = math.radians(spec.fov_y_deg) / 2.0
         self._noise_rad = math.radians(spec.noise_sigma_deg)
+        # tan(angle) per pixel of the driver's conversion.
+        self._tan_per_px = (2.0 * math.tan(math.radians(spec.driver_fov_deg[0]) / 2.0) / spec.pixels[0],
+                            2.0 * math.tan(math.radians(spec.driver_fov_deg[1]) / 2.0) / spec.pixels[1])
 
     def visible(self, pose: CameraPose) -> bool:
         height_m = -pose.down_m
@@ -82,6 +101,16 @@ class IrLockModel:
         if abs(angle_x) > self._half_fov_x or abs(angle_y) > self._half_fov_y:
             return None
         noise = self._noise_rad
-        return TargetReading(sensor="irlock", capture_time_s=capture_time_s,
-                             angle_x_rad=angle_x + noise * float(self._rng.standard_normal()),
-                             angle_y_rad=angle_y + noise * float(self._rng.standard_normal()))
+        angle_x += noise * float(self._rng.standard_normal())
+        angle_y += noise * float(self._rng.standard_normal())
+        if self.spec.quantize:
+            angle_x, angle_y = self._quantized(angle_x, angle_y)
+        return TargetReading(sensor="irlock", capture_time_s=capture_time_s, angle_x_rad=angle_x,
+                             angle_y_rad=angle_y)
+
+    def _quantized(self, angle_x: float, angle_y: float) -> tuple[float, float]:
+        """The angles of the pixel the block centre falls in (pixel centres on the driver's scale)."""
+        step_x, step_y = self._tan_per_px
+        tan_x = (math.floor(math.tan(angle_x) / step_x) + 0.5) * step_x
+        tan_y = (math.floor(math.tan(angle_y) / step_y) + 0.5) * step_y
+        return math.atan(tan_x), math.atan(tan_y)

@@ -32,7 +32,12 @@ class LoggingDetector:
         self.rows = 0
 
     def detect(self, image: np.ndarray) -> list[MarkerDetection]:
-        detections = self.detector.detect(image)
+        return self._log(self.detector.detect(image))
+
+    def detect_frame(self, frame) -> list[MarkerDetection]:
+        return self._log(self.detector.detect_frame(frame))
+
+    def _log(self, detections: list[MarkerDetection]) -> list[MarkerDetection]:
         chosen = choose_smallest(detections)
         angles = [math.degrees(a) for a in chosen.angles_rad()] if chosen else [None, None]
         self._writer.writerow([round(self.clock.now_s(), 3), " ".join(str(d.marker_id) for d in detections),

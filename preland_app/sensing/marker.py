@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .camera import CameraModel
+from .camera import CameraModel, Frame
 from .pad import MarkerSpec, PadSpec, aruco_dictionary
 from .readings import TargetReading, angles_from_camera_point
 
@@ -80,10 +80,12 @@ class MarkerDetector:
 
     def detect(self, image: np.ndarray) -> list[MarkerDetection]:
         """All of the pad's markers found in `image` (grayscale or BGR), with poses."""
-        if image.ndim == 3:
-            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        corners, ids, _ = self.detector.detectMarkers(image)
+        corners, ids, _ = self.detector.detectMarkers(_gray(image))
         return self._poses(corners, ids, offset=(0.0, 0.0))
+
+    def detect_frame(self, frame) -> list[MarkerDetection]:
+        """`detect` on a camera frame (`Frame`, or a virtual camera's frame, drawn as it is read)."""
+        return self.detect(frame.image)
 
     def _poses(self, corners, ids, *, offset: tuple[float, float]) -> list[MarkerDetection]:
         if ids is None:
@@ -113,7 +115,10 @@ class TrackingMarkerDetector(MarkerDetector):
     next frame is searched in a window around it (twice the markers' extent
     plus a margin); the whole frame is searched when that finds nothing, and
     every `full_frame_every` frames so that markers coming into view elsewhere
-    are not missed. Results are the same detections, found in less time.
+    are not missed. In the window, the detector keeps the whole frame's marker
+    size limits in pixels (OpenCV states them relative to the image searched),
+    so a window finds what the whole frame would find there. Given a virtual
+    camera's frame (`detect_frame`), only the window is drawn.
     """
 
     def __init__(self, *, pad: PadSpec, camera: CameraModel, parameters: cv2.aruco.DetectorParameters | None = None,
@@ -121,25 +126,40 @@ class TrackingMarkerDetector(MarkerDetector):
         super().__init__(pad=pad, camera=camera, parameters=parameters)
         self.full_frame_every = full_frame_every
         self.margin_px = margin_px
+        self._window_parameters = self.detector.getDetectorParameters()
+        self._min_perimeter_rate = self._window_parameters.minMarkerPerimeterRate
+        self._max_perimeter_rate = self._window_parameters.maxMarkerPerimeterRate
+        self._window_detector = cv2.aruco.ArucoDetector(self.detector.getDictionary(), self._window_parameters)
         self._window: tuple[int, int, int, int] | None = None
         self._frames = 0
         self.window_hits = 0
 
     def detect(self, image: np.ndarray) -> list[MarkerDetection]:
-        if image.ndim == 3:
-            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        return self.detect_frame(Frame(_gray(image), capture_time_s=0.0))
+
+    def detect_frame(self, frame) -> list[MarkerDetection]:
         self._frames += 1
+        width, height = frame.size_px
         detections: list[MarkerDetection] = []
         if self._window is not None and self._frames % self.full_frame_every != 0:
             x0, y0, x1, y1 = self._window
-            corners, ids, _ = self.detector.detectMarkers(np.ascontiguousarray(image[y0:y1, x0:x1]))
+            corners, ids, _ = self._window_detector_for(x1 - x0, y1 - y0, max(width, height)).detectMarkers(
+                _gray(frame.region(x0, y0, x1, y1)))
             detections = self._poses(corners, ids, offset=(float(x0), float(y0)))
             if detections:
                 self.window_hits += 1
         if not detections:
-            detections = super().detect(image)
-        self._window = self._window_around(detections, image.shape) if detections else None
+            detections = super().detect(frame.image)
+        self._window = self._window_around(detections, (height, width)) if detections else None
         return detections
+
+    def _window_detector_for(self, width_px: int, height_px: int, frame_side_px: int) -> cv2.aruco.ArucoDetector:
+        """The window's detector, with the marker perimeter limits of the whole frame in pixels."""
+        scale = frame_side_px / max(width_px, height_px)
+        self._window_parameters.minMarkerPerimeterRate = self._min_perimeter_rate * scale
+        self._window_parameters.maxMarkerPerimeterRate = self._max_perimeter_rate * scale
+        self._window_detector.setDetectorParameters(self._window_parameters)
+        return self._window_detector
 
     def _window_around(self, detections: list[MarkerDetection], shape) -> tuple[int, int, int, int] | None:
         points = np.vstack([d.corners_px for d in detections])
@@ -153,6 +173,10 @@ class TrackingMarkerDetector(MarkerDetector):
         if (x1 - x0) * (y1 - y0) > 0.6 * width * height:
             return None  # the window would be most of the frame: search the frame
         return x0, y0, x1, y1
+
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
 
 
 def choose_smallest(detections: list[MarkerDetection]) -> MarkerDetection | None:

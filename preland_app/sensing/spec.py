@@ -20,7 +20,9 @@ class CameraSpec:
 
     calibration: str | None = None
     frame_rate_hz: float = 30.0
-    mount_offset_frd_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # Thesis Fig. 14b: the camera right of the IR-LOCK, the pair at the frame's centre (boards 25 mm
+    # and 53 mm wide): the camera's lens 27 mm right of the centre.
+    mount_offset_frd_m: tuple[float, float, float] = (0.0, 0.027, 0.0)
     noise_sigma: float = 2.0
     blur_px: float = 0.0
     exposure_gain: float = 1.0

@@ -66,6 +66,17 @@ def camera_extrinsics(camera: CameraModel, pose: CameraPose) -> tuple[np.ndarray
     return R_CAM_FROM_BODY @ r_ned_body.T, centre
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Shot:
+    """One frame as captured, before any pixel is drawn: image -> texture homographies (px) of the
+    background and of the pad's pyramid level, and the sensor-noise draw (bank index, row, column offset)."""
+
+    image_to_background: np.ndarray
+    image_to_pad: np.ndarray
+    pad_texture: np.ndarray
+    noise: tuple[int, int, int] | None
+
+
 class VirtualCamera:
     """Renders grayscale frames of the pad lying at `pad_origin_ned_m` (north, east) on flat ground."""
 
@@ -91,6 +102,8 @@ class VirtualCamera:
         self._pad_levels = self._make_pad_pyramid(pad)
         self._undistort_maps = self._make_distortion_maps() if camera.has_distortion else None
         h, w = camera.height_px + 32, camera.width_px + 32
+        # OpenCV's Gaussian kernel for 8-bit images reaches round(3 sigma) px; one more for rounding.
+        self._blur_radius_px = math.ceil(3.0 * effects.blur_px) + 1 if effects.blur_px > 0 else 0
         self._noise_bank = [
             np.round(rng.standard_normal((h, w), dtype=np.float32) * effects.noise_sigma).astype(np.int16)
             for _ in range(4)
@@ -102,11 +115,20 @@ class VirtualCamera:
     def _make_background(rng: np.random.Generator) -> np.ndarray:
         """Grass-like texture: smoothed noise at a few scales, mid grey, low contrast."""
         size = int(_BACKGROUND_EXTENT_M * _BACKGROUND_PX_PER_M)
-        texture = np.zeros((size, size), np.float32)
+        texture = None
         for cells, weight in ((size // 64, 30.0), (size // 8, 18.0), (size, 10.0)):
-            small = rng.standard_normal((cells, cells)).astype(np.float32)
-            texture += weight * cv2.resize(small, (size, size), interpolation=cv2.INTER_CUBIC)
-        return np.clip(110.0 + texture, 40, 190).astype(np.uint8)
+            layer = rng.standard_normal((cells, cells)).astype(np.float32)
+            if cells != size:
+                layer = cv2.resize(layer, (size, size), interpolation=cv2.INTER_CUBIC)
+            # In place, in single precision: the same sums as a float32 accumulation, without temporaries.
+            np.multiply(layer, np.float32(weight), out=layer)
+            if texture is None:
+                texture = layer
+            else:
+                texture += layer
+        texture += np.float32(110.0)
+        np.clip(texture, 40, 190, out=texture)
+        return texture.astype(np.uint8)
 
     @staticmethod
     def _make_pad_pyramid(pad: PadSpec) -> list[tuple[float, np.ndarray]]:
@@ -139,17 +161,15 @@ class VirtualCamera:
         t = -r @ centre
         return self._k @ np.column_stack([r[:, 0], r[:, 1], t])
 
-    def render(self, pose: CameraPose) -> np.ndarray:
-        """One grayscale frame (height x width, uint8) seen from `pose`."""
+    def capture(self, pose: CameraPose) -> Shot:
+        """Everything a frame seen from `pose` depends on, fixed now (the pixels come later, and only those
+        asked for): the layers' homographies, the pad's pyramid level and this frame's sensor-noise draw."""
         ground_to_image = self._ground_homography(pose)
-        flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
         # Background: texture pixel (col, row) -> ground (north, east), field centred on the origin.
         half = _BACKGROUND_EXTENT_M / 2.0
         ppm = _BACKGROUND_PX_PER_M
         bg_to_ground = np.array([[0.0, -1.0 / ppm, half], [1.0 / ppm, 0.0, -half], [0.0, 0.0, 1.0]])
         image_to_bg = np.linalg.inv(ground_to_image @ bg_to_ground)
-        frame = cv2.warpPerspective(self._background, image_to_bg, self._size, flags=flags,
-                                    borderMode=cv2.BORDER_REFLECT)
         # Pad: the coarsest pyramid level that still has twice the image's ground resolution
         # (sharp edges for the detector, no aliasing from high up).
         height_m = max(0.05, -pose.down_m)
@@ -165,25 +185,109 @@ class VirtualCamera:
                                         [0.0, 0.0, 1.0]])
         rotate = np.array([[c, -s, self.pad_origin_ned_m[0]], [s, c, self.pad_origin_ned_m[1]], [0.0, 0.0, 1.0]])
         image_to_pad = np.linalg.inv(ground_to_image @ rotate @ pad_to_ground_local)
-        # BORDER_TRANSPARENT leaves the background wherever the pad texture does not reach.
-        cv2.warpPerspective(texture, image_to_pad, self._size, dst=frame, flags=flags,
-                            borderMode=cv2.BORDER_TRANSPARENT)
-        return self._apply_effects(frame)
-
-    def _apply_effects(self, frame: np.ndarray) -> np.ndarray:
-        if self._undistort_maps is not None:
-            frame = cv2.remap(frame, self._undistort_maps[0], self._undistort_maps[1], cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_REFLECT)
-        effects = self.effects
-        if effects.blur_px > 0:
-            frame = cv2.GaussianBlur(frame, (0, 0), effects.blur_px)
-        if effects.exposure_gain != 1.0:
-            frame = cv2.convertScaleAbs(frame, alpha=effects.exposure_gain)
-        if effects.noise_sigma > 0:
+        noise = None
+        if self.effects.noise_sigma > 0:
             # Sensor noise: one of a bank of pre-drawn noise fields, shifted by a random offset
             # (drawing 300k normals per frame would cost more than rendering it).
             index = int(self._rng.integers(len(self._noise_bank)))
             dy, dx = (int(v) for v in self._rng.integers(0, 32, size=2))
-            noise = self._noise_bank[index][dy:dy + frame.shape[0], dx:dx + frame.shape[1]]
+            noise = (index, dy, dx)
+        return Shot(image_to_background=image_to_bg, image_to_pad=image_to_pad, pad_texture=texture, noise=noise)
+
+    def render(self, pose: CameraPose) -> np.ndarray:
+        """One grayscale frame (height x width, uint8) seen from `pose`."""
+        return self.render_shot(self.capture(pose))
+
+    def render_shot(self, shot: Shot, region: tuple[int, int, int, int] | None = None) -> np.ndarray:
+        """The pixels of `shot` in `region` (x0, y0, x1, y1; px, end exclusive; default the whole frame):
+        exactly the same pixels as the whole frame cropped there. Each layer is warped straight into the
+        region with its homography shifted by the region's origin; blur and lens distortion widen what is
+        warped by what they read around each pixel; the noise is the same field at the same offsets."""
+        w, h = self._size
+        x0, y0, x1, y1 = region if region is not None else (0, 0, w, h)
+        radius = self._blur_radius_px
+        blurred = (max(0, x0 - radius), max(0, y0 - radius), min(w, x1 + radius), min(h, y1 + radius))
+        if self._undistort_maps is not None:
+            ideal = self._ideal_region(blurred)
+            frame = self._warp_layers(shot, ideal)
+            bx0, by0, bx1, by1 = blurred
+            map_x = self._undistort_maps[0][by0:by1, bx0:bx1]
+            map_y = self._undistort_maps[1][by0:by1, bx0:bx1]
+            if ideal[0] or ideal[1]:
+                map_x, map_y = map_x - np.float32(ideal[0]), map_y - np.float32(ideal[1])
+            frame = cv2.remap(frame, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+        else:
+            frame = self._warp_layers(shot, blurred)
+        effects = self.effects
+        if effects.blur_px > 0:
+            frame = cv2.GaussianBlur(frame, (0, 0), effects.blur_px)
+        if blurred != (x0, y0, x1, y1):
+            frame = frame[y0 - blurred[1]:y1 - blurred[1], x0 - blurred[0]:x1 - blurred[0]]
+        if effects.exposure_gain != 1.0:
+            frame = cv2.convertScaleAbs(frame, alpha=effects.exposure_gain)
+        if shot.noise is not None:
+            index, dy, dx = shot.noise
+            noise = self._noise_bank[index][dy + y0:dy + y1, dx + x0:dx + x1]
             frame = np.clip(frame.astype(np.int16) + noise, 0, 255).astype(np.uint8)
+        return np.ascontiguousarray(frame)
+
+    def _warp_layers(self, shot: Shot, region: tuple[int, int, int, int]) -> np.ndarray:
+        """Background then pad, warped into `region` of the ideal (undistorted) image."""
+        x0, y0, x1, y1 = region
+        size = (x1 - x0, y1 - y0)
+        image_to_bg, image_to_pad = shot.image_to_background, shot.image_to_pad
+        if x0 or y0:
+            shift = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
+            image_to_bg, image_to_pad = image_to_bg @ shift, image_to_pad @ shift
+        flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+        frame = cv2.warpPerspective(self._background, image_to_bg, size, flags=flags, borderMode=cv2.BORDER_REFLECT)
+        # BORDER_TRANSPARENT leaves the background wherever the pad texture does not reach.
+        cv2.warpPerspective(shot.pad_texture, image_to_pad, size, dst=frame, flags=flags,
+                            borderMode=cv2.BORDER_TRANSPARENT)
         return frame
+
+    def _ideal_region(self, region: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+        """The part of the ideal image that lens distortion reads for `region` of the output: the bilinear
+        taps around each pixel's source point; the whole image when a tap falls outside it (the border is
+        then reflected about the image's own edge)."""
+        w, h = self._size
+        x0, y0, x1, y1 = region
+        if (x0, y0, x1, y1) == (0, 0, w, h):
+            return region
+        map_x = self._undistort_maps[0][y0:y1, x0:x1]
+        map_y = self._undistort_maps[1][y0:y1, x0:x1]
+        ix0, ix1 = math.floor(float(map_x.min())) - 1, math.floor(float(map_x.max())) + 3
+        iy0, iy1 = math.floor(float(map_y.min())) - 1, math.floor(float(map_y.max())) + 3
+        if ix0 < 0 or iy0 < 0 or ix1 > w or iy1 > h:
+            return 0, 0, w, h
+        return ix0, iy0, ix1, iy1
+
+
+class RenderedFrame:
+    """A virtual camera frame, captured (pose, noise draw) but drawn only when read: `image` renders the
+    whole frame once; `region()` renders only the part asked for (the same pixels as `image` there, to
+    within the warp's rounding), or crops `image` when it is already drawn. Same interface as `Frame`."""
+
+    __slots__ = ("_renderer", "_shot", "_image", "capture_time_s", "index")
+
+    def __init__(self, *, renderer: VirtualCamera, shot: Shot, capture_time_s: float, index: int) -> None:
+        self._renderer = renderer
+        self._shot = shot
+        self._image: np.ndarray | None = None
+        self.capture_time_s = capture_time_s
+        self.index = index
+
+    @property
+    def image(self) -> np.ndarray:
+        if self._image is None:
+            self._image = self._renderer.render_shot(self._shot)
+        return self._image
+
+    @property
+    def size_px(self) -> tuple[int, int]:
+        return self._renderer.camera.width_px, self._renderer.camera.height_px
+
+    def region(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+        if self._image is not None:
+            return np.ascontiguousarray(self._image[y0:y1, x0:x1])
+        return self._renderer.render_shot(self._shot, (x0, y0, x1, y1))

@@ -10,7 +10,8 @@ their behaviour follow ArduCopter 4.x:
 * LAND: hold the stopping point horizontally; descend as mode_land.cpp does
   (sqrt-shaped approach to LAND_ALT_LOW at up to LAND_SPEED_HIGH or
   WPNAV_SPEED_DN, then LAND_SPEED); disarm on land detection;
-* RTL: climb to RTL_ALT, return home, loiter RTL_LOIT_TIME, land.
+* RTL: climb to RTL_ALT, return home, loiter RTL_LOIT_TIME, land (or, with
+  RTL_ALT_FINAL > 0, descend to it and hold there, as mode_rtl.cpp does).
 
 Positions inside are NED in metres from the simulation origin, in the
 estimate's frame; commands relative to home are converted on entry.
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 from ..errors import CommandDenied
 from ..vehicle.types import FlightMode, LandedState, LandingTarget
 from .control import HorizontalController, VerticalController, sqrt_controller, stopping_distance_m
-from .dynamics import ActuatorDemand
+from .dynamics import GRAVITY_M_S2, ActuatorDemand
 from .navigation import NavEstimate
 from .params import ParameterTable
 from .precland import PrecisionLandingEstimator
@@ -41,6 +42,11 @@ PRECLAND_ACCEPTABLE_ERROR_M = 0.15
 PRECLAND_MIN_DESCENT_SPEED_M_S = 0.10
 PLND_TYPE_COMPANION = 1
 TAKEOFF_COMPLETE_MARGIN_M = 0.1
+LOITER_VEL_CORRECTION_MAX_M_S = 2.0  # AC_Loiter.cpp LOITER_VEL_CORRECTION_MAX
+# PLND_OPTIONS bits (AC_PrecLand.h).
+PLND_OPTION_MOVING_TARGET = 1
+PLND_OPTION_PRECLAND_AFTER_REPOSITION = 2
+PLND_OPTION_FAST_DESCEND = 4
 _ARMABLE_MODES = (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.POSHOLD, FlightMode.STABILIZE)
 _POSITION_MODES = (FlightMode.GUIDED, FlightMode.LOITER, FlightMode.POSHOLD, FlightMode.RTL, FlightMode.LAND)
 
@@ -56,6 +62,7 @@ class RtlStage(enum.Enum):
     CLIMB = "climb"
     RETURN = "return"
     LOITER = "loiter"
+    FINAL_DESCENT = "final_descent"
     FINAL = "final"
 
 
@@ -281,7 +288,8 @@ class Autopilot:
             self.precland.record_pose(now_s, north_m=nav.north_m, east_m=nav.east_m,
                                       height_m=self.height_above_ground_m(),
                                       roll_rad=self.roll_rad + nav.roll_error_rad,
-                                      pitch_rad=self.pitch_rad + nav.pitch_error_rad, yaw_rad=yaw_rad)
+                                      pitch_rad=self.pitch_rad + nav.pitch_error_rad,
+                                      yaw_rad=yaw_rad + nav.heading_error_rad)
         if not self.armed:
             self.last_climb_demand_m_s = 0.0
             return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
@@ -296,7 +304,7 @@ class Autopilot:
             demand = self._run_rtl(dt_s, nav)
         else:  # LOITER, POSHOLD, and STABILIZE with no pilot: hold position and altitude
             demand = self._fly_to(dt_s, nav, self._target_north_m, self._target_east_m, self._target_down_m,
-                                  speed_max_m_s=self.params.m_s("LOIT_SPEED"))
+                                  speed_max_m_s=self.params.m_s("LOIT_SPEED"), loiter=True)
         self.last_climb_demand_m_s = demand.climb_rate_m_s
         self._update_land_detector(dt_s, touching_ground, demand)
         return demand
@@ -331,11 +339,26 @@ class Autopilot:
         else:
             self._land_detector_s = 0.0
 
+    def _loiter_accel_m_s2(self) -> float:
+        """AC_Loiter's correction acceleration: LOIT_ACC_MAX, at most what ANGLE_MAX allows
+        (AC_Loiter::sanity_check_params)."""
+        angle_max_rad = math.radians(self.params.value("ANGLE_MAX") / 100.0)
+        return min(self.params.m_s("LOIT_ACC_MAX"), GRAVITY_M_S2 * math.tan(angle_max_rad))
+
     def _fly_to(self, dt_s: float, nav: NavEstimate, north_m: float | None, east_m: float | None,
                 down_m: float | None, *, speed_max_m_s: float, climb_rate_m_s: float | None = None,
                 velocity_ff: tuple[float, float] = (0.0, 0.0),
-                velocity_feedback: tuple[float, float] | None = None) -> ActuatorDemand:
+                velocity_feedback: tuple[float, float] | None = None,
+                loiter: bool = False) -> ActuatorDemand:
+        """One position-control step. `loiter`: the position controller as AC_Loiter sets it up (LOITER,
+        POSHOLD, LAND): corrections at LOIT_ACC_MAX and at most LOITER_VEL_CORRECTION_MAX; otherwise as
+        AC_WPNav does (WPNAV_ACCEL)."""
         p = self.params
+        if loiter:
+            accel_max_m_s2 = self._loiter_accel_m_s2()
+            speed_max_m_s = min(speed_max_m_s, LOITER_VEL_CORRECTION_MAX_M_S)
+        else:
+            accel_max_m_s2 = p.m_s("WPNAV_ACCEL")
         velocity_north, velocity_east = velocity_feedback or (nav.velocity_north_m_s, nav.velocity_east_m_s)
         roll, pitch = self._xy.update(
             dt_s=dt_s,
@@ -349,7 +372,7 @@ class Autopilot:
             velocity_ff_north_m_s=velocity_ff[0],
             velocity_ff_east_m_s=velocity_ff[1],
             speed_max_m_s=speed_max_m_s,
-            accel_max_m_s2=p.m_s("WPNAV_ACCEL"),
+            accel_max_m_s2=accel_max_m_s2,
             pos_p=p.value("PSC_POSXY_P"),
             vel_p=p.value("PSC_VELXY_P"),
             vel_i=p.value("PSC_VELXY_I"),
@@ -367,8 +390,10 @@ class Autopilot:
                 speed_down_m_s=p.m_s("WPNAV_SPEED_DN"),
             )
         climb = self._z.shape(dt_s=dt_s, climb_rate_m_s=climb_rate_m_s, accel_max_m_s2=accel_z)
+        climb_accel = self._z.accel_for_climb(dt_s=dt_s, est_climb_rate_m_s=-nav.velocity_down_m_s,
+                                              vel_p=p.value("PSC_VELZ_P"))
         return ActuatorDemand(roll_rad=roll, pitch_rad=pitch, yaw_rad=self.yaw_target_rad,
-                              climb_rate_m_s=climb, motors_armed=True)
+                              climb_rate_m_s=climb, climb_accel_m_s2=climb_accel, motors_armed=True)
 
     def _run_guided(self, dt_s: float, nav: NavEstimate) -> ActuatorDemand:
         p = self.params
@@ -433,7 +458,8 @@ class Autopilot:
                 if self._retry_hold is None:
                     stop_n, stop_e = self._stopping_point()
                     self._retry_hold = (stop_n, stop_e, nav.down_m)
-                return self._fly_to(dt_s, nav, *self._retry_hold, speed_max_m_s=self.params.m_s("LOIT_SPEED"))
+                return self._fly_to(dt_s, nav, *self._retry_hold, speed_max_m_s=self.params.m_s("LOIT_SPEED"),
+                                    loiter=True)
             self._retry_hold = None
             if target is not None:
                 if not self._precland_active:
@@ -446,8 +472,15 @@ class Autopilot:
                 # estimator's target-relative velocity instead of the EKF's (override_vehicle_velocity_xy).
                 relative_velocity = self.precland.relative_velocity_m_s(self._now_s)
                 feedback = None if relative_velocity is None else (-relative_velocity[0], -relative_velocity[1])
+                # PLND_OPTIONS bit 0 (moving target): the target's estimated ground velocity is the
+                # velocity feed-forward (AC_PrecLand::get_target_velocity_cms); otherwise it is zero.
+                target_velocity = (0.0, 0.0)
+                if self._plnd_option(PLND_OPTION_MOVING_TARGET) and relative_velocity is not None:
+                    target_velocity = (relative_velocity[0] + nav.velocity_north_m_s,
+                                       relative_velocity[1] + nav.velocity_east_m_s)
                 return self._fly_to(dt_s, nav, north_m, east_m, None, speed_max_m_s=self.params.m_s("LOIT_SPEED"),
-                                    climb_rate_m_s=climb_rate, velocity_feedback=feedback)
+                                    climb_rate_m_s=climb_rate, velocity_feedback=feedback,
+                                    velocity_ff=target_velocity, loiter=True)
             if self._precland_active:
                 # Target lost: hold where we are and keep descending (PLND_STRICT=0 behaviour).
                 self._precland_active = False
@@ -455,16 +488,22 @@ class Autopilot:
                 north_m, east_m = self._stopping_point()
                 self._target_north_m, self._target_east_m = north_m, east_m
         return self._fly_to(dt_s, nav, north_m, east_m, None, speed_max_m_s=self.params.m_s("LOIT_SPEED"),
-                            climb_rate_m_s=climb_rate)
+                            climb_rate_m_s=climb_rate, loiter=True)
+
+    def _plnd_option(self, bit: int) -> bool:
+        return int(self.params.value("PLND_OPTIONS")) & bit != 0
 
     def _precland_descent_rate_m_s(self, nav: NavEstimate, target: tuple[float, float], climb_rate: float) -> float:
         """mode_land.cpp with a target: no descent while farther than PLND_XY_DIST_MAX; between 0.35 and
-        2 m above the target, descend slower the larger the horizontal error."""
+        2 m above the target, descend slower the larger the horizontal error, unless PLND_OPTIONS bit 2."""
         error_m = math.hypot(target[0] - nav.north_m, target[1] - nav.east_m)
         xy_dist_max_m = self.params.value("PLND_XY_DIST_MAX")
         if xy_dist_max_m > 0 and error_m > xy_dist_max_m:
             return 0.0
         height_m = self.precland.last_measured_height_m
+        if self._plnd_option(PLND_OPTION_FAST_DESCEND):
+            # PLND_OPTIONS bit 2: keep LAND_SPEED in the final descent (no slow-down near the target).
+            return climb_rate
         if height_m is not None and PRECLAND_SLOWDOWN_MIN_HEIGHT_M < height_m < PRECLAND_SLOWDOWN_MAX_HEIGHT_M:
             max_descent = abs(self.params.m_s("LAND_SPEED")) * 0.5
             slowdown = max(0.0, error_m * max_descent / PRECLAND_ACCEPTABLE_ERROR_M)
@@ -488,8 +527,12 @@ class Autopilot:
             return self._fly_to(dt_s, nav, home_n, home_e, target_down, speed_max_m_s=speed)
         if stage is RtlStage.LOITER:
             if self._now_s - self._rtl_stage_time_s >= p.value("RTL_LOIT_TIME") / 1000.0:
-                self._next_rtl_stage(RtlStage.FINAL)
+                # mode_rtl.cpp: with RTL_ALT_FINAL > 0, descend to it and stay there instead of landing.
+                self._next_rtl_stage(RtlStage.FINAL_DESCENT if p.value("RTL_ALT_FINAL") > 0 else RtlStage.FINAL)
             return self._fly_to(dt_s, nav, home_n, home_e, target_down, speed_max_m_s=speed)
+        if stage is RtlStage.FINAL_DESCENT:
+            return self._fly_to(dt_s, nav, home_n, home_e, self.home_down_m - p.m_s("RTL_ALT_FINAL"),
+                                speed_max_m_s=speed, loiter=True)
         return self._run_land(dt_s, nav, home_n, home_e)
 
     def _next_rtl_stage(self, stage: RtlStage) -> None:
@@ -497,3 +540,5 @@ class Autopilot:
         self._rtl_stage_time_s = self._now_s
         if stage is RtlStage.FINAL:
             self._say("RTL: landing")
+        elif stage is RtlStage.FINAL_DESCENT:
+            self._say("RTL: descending to RTL_ALT_FINAL")

@@ -135,13 +135,23 @@ class HorizontalController:
 
 
 class VerticalController:
-    """Altitude -> climb rate (sqrt controller), with climb-rate demand slewed by the vertical accel limit."""
+    """Altitude -> climb rate (sqrt controller), with climb-rate demand slewed by the vertical accel limit;
+    climb rate -> vertical acceleration (AC_PosControl's z velocity loop, P gain PSC_VELZ_P)."""
 
     def __init__(self) -> None:
         self.climb_demand_m_s = 0.0
+        self._last_delta_m_s = 0.0
 
     def reset(self, climb_rate_m_s: float = 0.0) -> None:
         self.climb_demand_m_s = climb_rate_m_s
+        self._last_delta_m_s = 0.0
+
+    def accel_for_climb(self, *, dt_s: float, est_climb_rate_m_s: float, vel_p: float) -> float:
+        """Vertical acceleration demand (m/s/s, up) for the current climb demand: the shaped demand's
+        own acceleration as feed-forward plus PSC_VELZ_P times the climb-rate error, limited to +-1 g."""
+        feedforward = self._last_delta_m_s / dt_s if dt_s > 0 else 0.0
+        accel = feedforward + vel_p * (self.climb_demand_m_s - est_climb_rate_m_s)
+        return max(-GRAVITY_M_S2, min(GRAVITY_M_S2, accel))
 
     def climb_for_altitude(self, *, target_alt_m: float, est_alt_m: float, pos_p: float,
                            accel_max_m_s2: float, speed_up_m_s: float, speed_down_m_s: float) -> float:
@@ -153,4 +163,5 @@ class VerticalController:
         max_delta = accel_max_m_s2 * dt_s
         delta = max(-max_delta, min(max_delta, climb_rate_m_s - self.climb_demand_m_s))
         self.climb_demand_m_s += delta
+        self._last_delta_m_s = delta
         return self.climb_demand_m_s

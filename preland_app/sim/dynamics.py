@@ -2,8 +2,9 @@
 
 The autopilot's inner loops (attitude and climb-rate controllers, motor mixing)
 are folded into first-order responses: the lean angles follow their demand with
-time constant `attitude_tau_s`, the climb rate follows its demand with
-`climb_tau_s`. Horizontal acceleration comes from the thrust tilt
+time constant `attitude_tau_s`; the vertical acceleration follows the autopilot's
+demand (its z velocity loop, PSC_VELZ_P) with the thrust lag `thrust_tau_s`.
+Horizontal acceleration comes from the thrust tilt
 (g tan(lean)) and linear drag of the air-relative velocity. See README,
 "Simulator", for what this leaves out.
 """
@@ -44,18 +45,21 @@ class BodyState:
     roll_rad: float = 0.0
     pitch_rad: float = 0.0
     yaw_rad: float = 0.0
+    accel_up_m_s2: float = 0.0
     on_ground: bool = True
     touchdowns: list[Touchdown] = field(default_factory=list)
 
 
 @dataclass(slots=True)
 class ActuatorDemand:
-    """What the autopilot asks of the airframe: lean angles (rad), yaw (rad), climb rate (m/s, up)."""
+    """What the autopilot asks of the airframe: lean angles (rad), yaw (rad), the climb rate it wants
+    (m/s, up) and the vertical acceleration its velocity loop asks for to get there (m/s/s, up)."""
 
     roll_rad: float = 0.0
     pitch_rad: float = 0.0
     yaw_rad: float = 0.0
     climb_rate_m_s: float = 0.0
+    climb_accel_m_s2: float = 0.0
     motors_armed: bool = False
 
 
@@ -76,6 +80,7 @@ class MultirotorDynamics:
                 # Resting on the ground: the airframe is level and does not slide.
                 s.velocity_north_m_s = s.velocity_east_m_s = s.velocity_down_m_s = 0.0
                 s.roll_rad = s.pitch_rad = 0.0
+                s.accel_up_m_s2 = 0.0
                 s.down_m = 0.0
                 return
             s.on_ground = False
@@ -94,9 +99,9 @@ class MultirotorDynamics:
             cy, sy = math.cos(s.yaw_rad), math.sin(s.yaw_rad)
             accel_north = accel_forward * cy - accel_right * sy
             accel_east = accel_forward * sy + accel_right * cy
-            climb_gain = min(1.0, dt_s / airframe.climb_tau_s)
-            climb_rate = -s.velocity_down_m_s
-            climb_rate += (demand.climb_rate_m_s - climb_rate) * climb_gain
+            thrust_gain = min(1.0, dt_s / airframe.thrust_tau_s)
+            s.accel_up_m_s2 += (demand.climb_accel_m_s2 - s.accel_up_m_s2) * thrust_gain
+            climb_rate = -s.velocity_down_m_s + s.accel_up_m_s2 * dt_s
             # Vertical gusts push the vehicle until the climb-rate loop catches up.
             climb_rate += (-wind_ned_m_s[2] - climb_rate) * airframe.drag_per_s * dt_s * 0.5
             s.velocity_down_m_s = -climb_rate
@@ -129,4 +134,5 @@ class MultirotorDynamics:
         s.down_m = 0.0
         s.on_ground = True
         s.velocity_north_m_s = s.velocity_east_m_s = s.velocity_down_m_s = 0.0
+        s.accel_up_m_s2 = 0.0
         s.roll_rad = s.pitch_rad = 0.0

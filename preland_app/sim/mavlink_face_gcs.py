@@ -16,6 +16,8 @@ session NAKed InvalidSession, and unknown opcodes UnknownCommand.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -69,12 +71,10 @@ class GroundStationServices:
     `self.mav`, warn through `self._say` and read home from `self.home_location()`."""
 
     _mission_request_warned = False
-
-    def home_location(self) -> GeoPoint:  # provided by MavlinkFace
-        raise NotImplementedError
-
-    def _say(self, text: str, severity: int = mavlink2.MAV_SEVERITY_WARNING) -> None:  # provided by MavlinkFace
-        raise NotImplementedError
+    # Provided by MavlinkFace, the only class this is mixed into.
+    mav: Any
+    home_location: Callable[[], GeoPoint]
+    _say: Callable[..., None]
 
     def _mission_ack(self, message, result: int) -> None:
         self.mav.mission_ack_send(message.get_srcSystem(), message.get_srcComponent(), result,

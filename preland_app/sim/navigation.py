@@ -10,11 +10,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from .dynamics import GRAVITY_M_S2
-from .noise import GaussianStream, GaussMarkov, SmoothGaussMarkov
+from .noise import GaussianStream, GaussMarkov, SmoothGaussMarkov, child_rng
 from .spec import NavigationSpec
+
+# Each error source draws from its own named stream of the trial seed, so switching one source on, off or
+# to another magnitude never changes what the others draw.
+NAVIGATION_STREAMS = ("gps", "baro", "imu", "rangefinder", "velocity", "attitude", "heading")
 
 _FAST_NOISE_TAU_S = 1.0
 _BARO_NOISE_TAU_S = 0.3
@@ -36,6 +38,7 @@ class NavEstimate:
     gps_error_east_m: float
     roll_error_rad: float = 0.0
     pitch_error_rad: float = 0.0
+    heading_error_rad: float = 0.0
     delta_velocity_north_m_s: float = 0.0
     delta_velocity_east_m_s: float = 0.0
 
@@ -44,23 +47,28 @@ class NavigationModel:
     """Turns the true state into the autopilot's estimate, with seeded errors."""
 
     def __init__(self, *, spec: NavigationSpec, rangefinder_min_m: float, rangefinder_max_m: float,
-                 rng: np.random.Generator) -> None:
+                 seed: int) -> None:
         self.spec = spec
         self.rangefinder_min_m = rangefinder_min_m
         self.rangefinder_max_m = rangefinder_max_m
-        noise = GaussianStream(rng)
-        self._noise = noise
+        streams = {name: GaussianStream(child_rng(seed, name)) for name in NAVIGATION_STREAMS}
+        gps, baro, attitude = streams["gps"], streams["baro"], streams["attitude"]
+        self._imu_noise = streams["imu"]
+        self._rangefinder_noise = streams["rangefinder"]
+        self._velocity_noise = streams["velocity"]
         self._drift_north = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
-                                              smooth_s=spec.gps_drift_smooth_s, noise=noise)
+                                              smooth_s=spec.gps_drift_smooth_s, noise=gps)
         self._drift_east = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
-                                             smooth_s=spec.gps_drift_smooth_s, noise=noise)
-        self._fast_north = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
-        self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
-        self._baro_drift = GaussMarkov(sigma=spec.baro_drift_sigma_m, tau_s=spec.baro_drift_tau_s, noise=noise)
-        self._baro_noise = GaussMarkov(sigma=spec.baro_noise_sigma_m, tau_s=_BARO_NOISE_TAU_S, noise=noise)
+                                             smooth_s=spec.gps_drift_smooth_s, noise=gps)
+        self._fast_north = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=gps)
+        self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=gps)
+        self._baro_drift = GaussMarkov(sigma=spec.baro_drift_sigma_m, tau_s=spec.baro_drift_tau_s, noise=baro)
+        self._baro_noise = GaussMarkov(sigma=spec.baro_noise_sigma_m, tau_s=_BARO_NOISE_TAU_S, noise=baro)
         attitude_sigma = math.radians(spec.attitude_noise_sigma_deg)
-        self._roll_error = GaussMarkov(sigma=attitude_sigma, tau_s=spec.attitude_noise_tau_s, noise=noise)
-        self._pitch_error = GaussMarkov(sigma=attitude_sigma, tau_s=spec.attitude_noise_tau_s, noise=noise)
+        self._roll_error = GaussMarkov(sigma=attitude_sigma, tau_s=spec.attitude_noise_tau_s, noise=attitude)
+        self._pitch_error = GaussMarkov(sigma=attitude_sigma, tau_s=spec.attitude_noise_tau_s, noise=attitude)
+        self._heading_error = GaussMarkov(sigma=math.radians(spec.heading_error_sigma_deg),
+                                          tau_s=spec.heading_error_tau_s, noise=streams["heading"])
         # The EKF's height origin is set at boot, so only the baro's change since then counts.
         self._baro_origin_m = self._baro_drift.value + self._baro_noise.value
         self._previous_velocity: tuple[float, float] | None = None
@@ -78,25 +86,26 @@ class NavigationModel:
         error_east = self._drift_east.step(dt_s) + self._fast_east.step(dt_s)
         error_down = -(self._baro_drift.step(dt_s) + self._baro_noise.step(dt_s) - self._baro_origin_m)
         velocity_sigma = spec.velocity_noise_sigma_m_s
-        noise = self._noise
+        imu = self._imu_noise
         # IMU delta-velocity over the step (true change plus accelerometer noise, plus the gravity
         # leak below).
         previous = self._previous_velocity or (velocity_ned_m_s[0], velocity_ned_m_s[1])
         self._previous_velocity = (velocity_ned_m_s[0], velocity_ned_m_s[1])
         accel_noise = spec.imu_accel_noise_m_s2 * dt_s
-        delta_north = velocity_ned_m_s[0] - previous[0] + accel_noise * noise.next()
-        delta_east = velocity_ned_m_s[1] - previous[1] + accel_noise * noise.next()
+        delta_north = velocity_ned_m_s[0] - previous[0] + accel_noise * imu.next()
+        delta_east = velocity_ned_m_s[1] - previous[1] + accel_noise * imu.next()
         rangefinder_m = None
         if spec.rangefinder_present:
             height_m = -down_m
-            slant_m = height_m / max(tilt_cos, 0.3) + spec.rangefinder_noise_sigma_m * noise.next()
+            slant_m = height_m / max(tilt_cos, 0.3) + spec.rangefinder_noise_sigma_m * self._rangefinder_noise.next()
             if self.rangefinder_min_m <= slant_m <= self.rangefinder_max_m:
                 rangefinder_m = slant_m * tilt_cos
-        velocity_north_m_s = velocity_ned_m_s[0] + velocity_sigma * noise.next()
-        velocity_east_m_s = velocity_ned_m_s[1] + velocity_sigma * noise.next()
-        velocity_down_m_s = velocity_ned_m_s[2] + velocity_sigma * noise.next()
+        velocity_north_m_s = velocity_ned_m_s[0] + velocity_sigma * self._velocity_noise.next()
+        velocity_east_m_s = velocity_ned_m_s[1] + velocity_sigma * self._velocity_noise.next()
+        velocity_down_m_s = velocity_ned_m_s[2] + velocity_sigma * self._velocity_noise.next()
         roll_error_rad = self._roll_error.step(dt_s)
         pitch_error_rad = self._pitch_error.step(dt_s)
+        heading_error_rad = self._heading_error.step(dt_s)
         # The EKF rotates the accelerometers' specific force (about g upwards) with its own attitude,
         # so an attitude error leaks gravity into the NED delta-velocity: body (forward, right)
         # error (-g * pitch error, g * roll error). It is what makes dead-reckoning between sensor
@@ -119,6 +128,7 @@ class NavigationModel:
             gps_error_east_m=error_east,
             roll_error_rad=roll_error_rad,
             pitch_error_rad=pitch_error_rad,
+            heading_error_rad=heading_error_rad,
             delta_velocity_north_m_s=delta_north,
             delta_velocity_east_m_s=delta_east,
         )

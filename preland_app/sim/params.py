@@ -126,7 +126,12 @@ ARDUCOPTER_PARAMS: dict[str, ParamInfo] = {
                                  "target's approximate position", 0, 1, kind=INT8),
     "PLND_ALT_MIN": ParamInfo(0.75, "m", "below this the target is not required", 0, 5, kind=REAL32),
     "PLND_ALT_MAX": ParamInfo(8, "m", "above this retries climb no further", 0, 50, kind=REAL32),
-    "PLND_OPTIONS": ParamInfo(0, "", "precision landing options bitmask", 0, 7, kind=INT16),
+    "PLND_OPTIONS": ParamInfo(0, "", "precision landing options bitmask (1: moving target, 2: precision landing "
+                              "after manual reposition, 4: keep descent speed in the final descent)", 0, 7, kind=INT16),
+    # AC_PrecLand's CAM_POS (an AP_Vector3f: three AP_Float on the wire).
+    "PLND_CAM_POS_X": ParamInfo(0, "m", "sensor position forward of the vehicle's centre", -5, 5, kind=REAL32),
+    "PLND_CAM_POS_Y": ParamInfo(0, "m", "sensor position right of the vehicle's centre", -5, 5, kind=REAL32),
+    "PLND_CAM_POS_Z": ParamInfo(0, "m", "sensor position below the vehicle's centre", -5, 5, kind=REAL32),
     # preland's embedded autopilot only (ArduPilot has no such parameters): never served over MAVLink.
     "PRL_LOST_HOLD": ParamInfo(0, "", "target lost: 0 keep descending for PLND_TIMEOUT (ArduPilot), 1 hold (thesis)",
                                0, 1, kind=INT8, ardupilot=False),

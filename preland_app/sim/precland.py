@@ -1,9 +1,12 @@
 """Onboard precision landing, after ArduPilot's AC_PrecLand with a companion source (PLND_TYPE=1).
 
 LANDING_TARGET angles are turned into a line of sight in body FRD,
-(-tan(angle_y), tan(angle_x), 1), rotated to NED with the attitude estimate at
-the measurement's capture time, and scaled by the measured distance or, without
-one, by the height above ground (rangefinder, else barometer). The result is the
+(-tan(angle_y), tan(angle_x), 1), rotated to NED with the attitude estimate of
+PLND_LAG seconds before the measurement arrived (ArduPilot keeps an inertial
+history buffer PLND_LAG long and treats every measurement as that old, whatever
+the message's timestamp says; a sensor whose true delay differs from PLND_LAG
+is fused with the wrong attitude and position), and scaled by the measured
+distance or, without one, by the height above ground (rangefinder, else barometer). The result is the
 target's position *relative to the vehicle*, moved to the present with the
 vehicle's motion since the capture. As in ArduPilot, the estimator works in that
 relative frame: PLND_EST_TYPE=1 is a per-axis position/velocity Kalman filter
@@ -27,6 +30,9 @@ from .params import ParameterTable
 MEASUREMENT_MAX_AGE_S = 1.0
 TARGET_LOST_AFTER_S = 2.0
 _HISTORY_S = 1.5
+# AC_PrecLand::init constrains PLND_LAG to this range before sizing the inertial history buffer.
+PLND_LAG_MIN_S = 0.02
+PLND_LAG_MAX_S = 0.25
 
 
 @dataclass(slots=True)
@@ -111,11 +117,13 @@ class PrecisionLandingEstimator:
         self._filters[1].predict(dt_s, -delta_velocity_ned_m_s[1], noise)
 
     def handle(self, now_s: float, target: LandingTarget) -> bool:
-        """Fuse one measurement; False when it was dropped (stale, or pointing above the horizon)."""
+        """Fuse one measurement received at `now_s`; False when it was dropped (older than 1 s by its
+        timestamp, or pointing above the horizon). Its pose is the one PLND_LAG before `now_s`."""
         if now_s - target.timestamp_s > MEASUREMENT_MAX_AGE_S:
             self.measurements_dropped += 1
             return False
-        pose = self._pose_at(target.timestamp_s)
+        lag_s = min(max(self.params.value("PLND_LAG"), PLND_LAG_MIN_S), PLND_LAG_MAX_S)
+        pose = self._pose_at(now_s - lag_s)
         current = self._history[-1] if self._history else None
         if pose is None or current is None:
             self.measurements_dropped += 1
@@ -130,14 +138,16 @@ class PrecisionLandingEstimator:
         if downward <= 0.05:
             self.measurements_dropped += 1
             return False
+        # PLND_CAM_POS_*: the sensor's offset from the vehicle's centre, rotated to NED with the same attitude.
+        cam_n, cam_e, cam_d = _body_to_ned(self._cam_pos_frd_m(), pose)
         if target.distance_m is not None and target.distance_m > 0:
             scale = target.distance_m / math.sqrt(north * north + east * east + downward * downward)
         else:
-            scale = max(pose.height_m, 0.0) / downward
-        # Relative position at capture, moved to now by the vehicle's motion since then.
-        rel_north = north * scale - (current.north_m - pose.north_m)
-        rel_east = east * scale - (current.east_m - pose.east_m)
-        rel_down = downward * scale
+            scale = max(pose.height_m - cam_d, 0.0) / downward
+        # Relative position PLND_LAG ago, moved to now by the vehicle's motion since then.
+        rel_north = north * scale + cam_n - (current.north_m - pose.north_m)
+        rel_east = east * scale + cam_e - (current.east_m - pose.east_m)
+        rel_down = downward * scale + cam_d
         self.last_measured_height_m = rel_down
         self._raw_rel = (rel_north, rel_east)
         variance = (0.01 * rel_down + 0.02) ** 2  # AC_PrecLand's xy measurement noise
@@ -153,13 +163,27 @@ class PrecisionLandingEstimator:
     def target_acquired(self, now_s: float) -> bool:
         return self._last_update_s is not None and now_s - self._last_update_s <= TARGET_LOST_AFTER_S
 
+    def _cam_pos_frd_m(self) -> tuple[float, float, float]:
+        p = self.params
+        return p.value("PLND_CAM_POS_X"), p.value("PLND_CAM_POS_Y"), p.value("PLND_CAM_POS_Z")
+
     def relative_position_m(self, now_s: float) -> tuple[float, float] | None:
-        """Target minus vehicle (north, east) in m, or None when not acquired."""
+        """Where the vehicle steers to, relative to itself (north, east) in m, or None when not acquired.
+
+        As AC_PrecLand::run_output_prediction: the target's relative position minus the sensor's
+        horizontal offset (PLND_CAM_POS_X/Y rotated with the current attitude), so the sensor, not the
+        vehicle's centre, ends up over the target."""
         if not self.target_acquired(now_s):
             return None
         if self.params.value("PLND_EST_TYPE") == 0 or self._filters is None:
-            return self._raw_rel
-        return self._filters[0].position, self._filters[1].position
+            rel = self._raw_rel
+        else:
+            rel = self._filters[0].position, self._filters[1].position
+        cam_x, cam_y, _ = self._cam_pos_frd_m()
+        if rel is None or (cam_x == 0.0 and cam_y == 0.0) or not self._history:
+            return rel
+        cam_n, cam_e, _ = _body_to_ned((cam_x, cam_y, 0.0), self._history[-1])
+        return rel[0] - cam_n, rel[1] - cam_e
 
     def relative_velocity_m_s(self, now_s: float) -> tuple[float, float] | None:
         """Target minus vehicle velocity (north, east) in m/s from the filter; None for the raw estimator."""
@@ -174,3 +198,16 @@ class PrecisionLandingEstimator:
         if rel is None:
             return None
         return vehicle_north_m + rel[0], vehicle_east_m + rel[1]
+
+
+def _body_to_ned(vector_frd: tuple[float, float, float], pose: _PoseSample) -> tuple[float, float, float]:
+    """A body FRD vector rotated to NED with `pose`'s attitude."""
+    x, y, z = vector_frd
+    if x == 0.0 and y == 0.0 and z == 0.0:
+        return 0.0, 0.0, 0.0
+    cr, sr = math.cos(pose.roll_rad), math.sin(pose.roll_rad)
+    cp, sp = math.cos(pose.pitch_rad), math.sin(pose.pitch_rad)
+    cy, sy = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+    return (cp * cy * x + (sr * sp * cy - cr * sy) * y + (cr * sp * cy + sr * sy) * z,
+            cp * sy * x + (sr * sp * sy + cr * cy) * y + (cr * sp * sy - sr * cy) * z,
+            -sp * x + sr * cp * y + cr * cp * z)

@@ -59,7 +59,7 @@ class Simulator:
             spec=self.environment.navigation,
             rangefinder_min_m=self.params.m_s("RNGFND1_MIN_CM"),
             rangefinder_max_m=self.params.m_s("RNGFND1_MAX_CM"),
-            rng=child_rng(seed, "navigation"),
+            seed=seed,
         )
         yaw_rad = math.radians(initial_yaw_deg)
         self.dynamics = MultirotorDynamics(airframe=self.environment.airframe, state=BodyState(yaw_rad=yaw_rad))

@@ -47,6 +47,9 @@ class NavigationSpec:
     (roll and pitch) wanders around the truth (`attitude_noise_sigma_deg`,
     time constant `attitude_noise_tau_s`: vibration and EKF error), which is
     what turns a camera or IR-LOCK angle into a position error h * tan(error).
+    The heading estimate is off by a slowly varying error (`heading_error_sigma_deg`,
+    `heading_error_tau_s`: compass calibration and local magnetic disturbance), which
+    rotates every body-frame target measurement on its way to NED.
     """
 
     gps_drift_sigma_m: float = 0.75
@@ -63,6 +66,8 @@ class NavigationSpec:
     attitude_noise_sigma_deg: float = 0.7
     attitude_noise_tau_s: float = 0.5
     imu_accel_noise_m_s2: float = 0.1
+    heading_error_sigma_deg: float = 1.5
+    heading_error_tau_s: float = 300.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -75,26 +80,29 @@ class NavigationSpec:
             "rangefinder_noise_sigma_m",
             "attitude_noise_sigma_deg",
             "imu_accel_noise_m_s2",
+            "heading_error_sigma_deg",
         ):
             _require(getattr(self, name) >= 0, name, "must be >= 0")
         _require(self.gps_drift_tau_s > 0, "gps_drift_tau_s", "must be > 0")
         _require(self.gps_drift_smooth_s > 0, "gps_drift_smooth_s", "must be > 0")
         _require(self.baro_drift_tau_s > 0, "baro_drift_tau_s", "must be > 0")
         _require(self.attitude_noise_tau_s > 0, "attitude_noise_tau_s", "must be > 0")
+        _require(self.heading_error_tau_s > 0, "heading_error_tau_s", "must be > 0")
 
 
 @dataclass(frozen=True)
 class AirframeSpec:
     """The multirotor's response, folded into first-order lags (see README).
 
-    `attitude_tau_s`: lean-angle response to a lean demand; `climb_tau_s`:
-    climb-rate response to a climb demand; `drag_per_s`: linear drag of the
+    `attitude_tau_s`: lean-angle response to a lean demand; `thrust_tau_s`:
+    vertical-acceleration response to the autopilot's acceleration demand (motors and
+    the z acceleration loop; the climb-rate loop around it is PSC_VELZ_P's); `drag_per_s`: linear drag of the
     air-relative velocity (1/s); `crash_speed_m_s`: vertical touchdown speed
     above which the touchdown is a crash.
     """
 
     attitude_tau_s: float = 0.15
-    climb_tau_s: float = 0.25
+    thrust_tau_s: float = 0.1
     yaw_rate_max_deg_s: float = 60.0
     drag_per_s: float = 0.35
     crash_speed_m_s: float = 3.0
@@ -103,7 +111,7 @@ class AirframeSpec:
     battery_cells: int = 4
 
     def __post_init__(self) -> None:
-        for name in ("attitude_tau_s", "climb_tau_s", "yaw_rate_max_deg_s", "crash_speed_m_s"):
+        for name in ("attitude_tau_s", "thrust_tau_s", "yaw_rate_max_deg_s", "crash_speed_m_s"):
             _require(getattr(self, name) > 0, name, "must be > 0")
         _require(self.drag_per_s >= 0, "drag_per_s", "must be >= 0")
         _require(self.battery_capacity_mah > 0, "battery_capacity_mah", "must be > 0")

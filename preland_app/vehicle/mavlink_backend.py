@@ -21,8 +21,10 @@ NED positions are relative to home (HOME_POSITION's x, y, z from the origin).
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import json
 import math
+import threading
 import time
 from typing import Any
 
@@ -115,6 +117,40 @@ def _quiet_mavsdk_logs() -> None:
     log_subscribe(handler)
 
 
+class DaemonCallExecutor(concurrent.futures.ThreadPoolExecutor):
+    """Runs each call on a daemon thread of its own, and never waits for one at shutdown.
+
+    MAVSDK's asyncio plugins run every call with `loop.run_in_executor(None, ...)`, and some calls can
+    block for good: a command that got MAV_RESULT_IN_PROGRESS waits for a final COMMAND_ACK that an
+    autopilot which has gone (SITL stopped, a link lost) never sends. preland bounds its own waits for
+    such calls; with the loop's default ThreadPoolExecutor, `asyncio.run` would still join the blocked
+    thread when the trial ends, and the trial (a campaign worker) would hang there for ever. (A
+    ThreadPoolExecutor only because asyncio accepts no other kind as a loop's default; its pool is unused.)"""
+
+    def submit(self, fn, /, *args, **kwargs) -> concurrent.futures.Future:
+        future: concurrent.futures.Future = concurrent.futures.Future()
+
+        def call() -> None:
+            if not future.set_running_or_notify_cancel():
+                return
+            try:
+                future.set_result(fn(*args, **kwargs))
+            except BaseException as error:  # handed to the awaiting coroutine
+                future.set_exception(error)
+
+        threading.Thread(target=call, name="preland-mavsdk-call", daemon=True).start()
+        return future
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Nothing to join: a call still blocked stays behind on its daemon thread."""
+
+
+def mavsdk_connection_url(url: str) -> str:
+    """`url` as MAVSDK takes it: `tcp://host:port` (a vehicle or SITL serving TCP, as ArduPilot's
+    documentation writes it) is MAVSDK's `tcpout://host:port`; MAVSDK 3 deprecates the bare `tcp://`."""
+    return "tcpout://" + url[len("tcp://"):] if url.startswith("tcp://") else url
+
+
 class MavlinkVehicle:
     """A Vehicle over a MAVLink connection URL (udp://:14550, udpout://host:port, tcp://host:port,
     serial:///dev/ttyAMA0:921600), for ArduPilot Copter."""
@@ -160,9 +196,10 @@ class MavlinkVehicle:
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.component_type import ComponentType
 
+        asyncio.get_running_loop().set_default_executor(DaemonCallExecutor())
         self._sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER))
         try:
-            await self._sdk.add_any_connection(self.url)
+            await self._sdk.add_any_connection(mavsdk_connection_url(self.url))
         except Exception as error:
             raise VehicleError(operation="connect", reason=f"{self.url}: {error}") from None
         system = await self._sdk.first_autopilot(timeout_s=self.connect_timeout_s)

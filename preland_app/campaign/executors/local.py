@@ -1,0 +1,128 @@
+"""Trials in worker processes on this machine (the default executor).
+
+Workers are spawned (no state leaks between trials), ignore Ctrl-C (the driver
+handles it) and die with the driver (PR_SET_PDEATHSIG). A worker that dies
+breaks the whole pool: every trial then in flight is run again in a new pool,
+and one that was in flight at two such deaths is recorded as an error. With one
+worker, trials run in the driver's own process, one per `completed` call.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import multiprocessing
+import os
+import signal
+from collections import deque
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+
+from ..store import TrialRecord
+from ..trials import TrialJob, error_record, run_job
+from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, ExecutorOptions, TrialExecutor
+
+
+def _worker_init() -> None:
+    """Workers die with the campaign process (a killed campaign leaves no orphans) and ignore Ctrl-C
+    (the campaign process handles it). OpenCV runs on the worker's own thread: the pool already has a
+    process per core, and OpenCV's thread pool on top would make them compete."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import cv2
+
+    cv2.setNumThreads(1)
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass  # not Linux: workers still exit when their pipe closes
+
+
+class LocalExecutor(TrialExecutor):
+    """`workers` processes on this machine (default: one per core)."""
+
+    name = "local"
+
+    def __init__(self, options: ExecutorOptions) -> None:
+        if options.address is not None:
+            raise ExecutorError("the local executor joins no cluster: an address needs another executor (ray)")
+        self.workers = max(1, options.workers or os.cpu_count() or 1)
+        self._pool: ProcessPoolExecutor | None = None
+        self._in_flight: dict[Future, TrialJob] = {}
+        self._inline: deque[TrialJob] = deque()
+        self._deaths: dict[tuple[str, int], int] = {}
+
+    def start(self) -> None:
+        if self.workers > 1:
+            self._pool = self._new_pool()
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_worker_init)
+
+    def slots(self) -> int:
+        return self.workers
+
+    def submit(self, job: TrialJob) -> None:
+        if self._pool is None:
+            self._inline.append(job)
+        else:
+            self._in_flight[self._pool.submit(run_job, job)] = job
+
+    def completed(self, timeout_s: float) -> list[TrialRecord]:
+        if self._pool is None:
+            return [run_job(self._inline.popleft())] if self._inline else []
+        if not self._in_flight:
+            return []
+        done, _ = wait(self._in_flight, timeout=timeout_s, return_when=FIRST_COMPLETED)
+        records, broken = [], False
+        for future in done:
+            try:
+                records.append(future.result())
+            except BrokenProcessPool:
+                broken = True
+                continue
+            except Exception as error:  # pickling or the like: still this trial's outcome
+                records.append(error_record(self._in_flight[future], f"{type(error).__name__}: {error}"))
+            del self._in_flight[future]
+        if broken:
+            records.extend(self._replace_broken_pool())
+        return records
+
+    def _replace_broken_pool(self) -> list[TrialRecord]:
+        """A worker died (killed, out of memory): run every trial then in flight again in a new pool."""
+        records, again = [], []
+        for future, job in self._in_flight.items():
+            if future.done() and not future.cancelled() and future.exception() is None:
+                records.append(future.result())
+                continue
+            self._deaths[job.key] = self._deaths.get(job.key, 0) + 1
+            if self._deaths[job.key] > WORKER_DEATH_RETRIES:
+                records.append(error_record(job, WORKER_DIED_MESSAGE))
+            else:
+                again.append(job)
+        self._in_flight.clear()
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = self._new_pool()
+        for job in again:
+            self.submit(job)
+        return records
+
+    def cancel(self) -> None:
+        self._inline.clear()
+        if self._pool is None:
+            return
+        processes = list(getattr(self._pool, "_processes", {}).values())
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            if process.is_alive():
+                process.kill()
+        for process in processes:
+            process.join(timeout=5)
+        self._pool = None
+        self._in_flight.clear()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None

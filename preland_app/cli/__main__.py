@@ -1,0 +1,5 @@
+"""`python -m preland_app.cli`."""
+
+from .app import main
+
+main()

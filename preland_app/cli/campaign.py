@@ -1,0 +1,122 @@
+"""preland campaign run: repeated trials into the results store (reading them: campaign_results.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from ..errors import PrelandError
+from .app import EXIT_FAILED, app, check_sitl_speedup, fail, open_store, progress_bar
+
+
+campaign_app = typer.Typer(help="Campaigns: repeated trials, a results store, reports.", no_args_is_help=True)
+app.add_typer(campaign_app, name="campaign")
+
+
+@campaign_app.command("run")
+def campaign_run(
+    campaign_file: Path = typer.Argument(..., metavar="FILE", help="Campaign YAML file (see campaigns/)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes (default: number of cores)."),
+    db: Path = typer.Option(Path("results.db"), "--db", help="SQLite results database (created if missing)."),
+    resume: bool = typer.Option(False, "--resume", help="Finish a campaign already in --db; no trial runs twice."),
+    report: Optional[Path] = typer.Option(None, "--report", help="Write the campaign's report to this folder."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+    sitl: Optional[str] = typer.Option(None, "--sitl", metavar="PATH",
+                                       help="Run each trial on a fresh ArduPilot SITL process (arducopter binary, "
+                                            "or $PRELAND_SITL_BINARY when given empty)."),
+    sitl_speedup: Optional[float] = typer.Option(
+        None, "--sitl-speedup", help="SITL --speedup (default: 2 for land modes that read camera frames, so the "
+                                     "companion keeps the camera's rate; 10 for the others)."),
+    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="More ArduPilot parameter defaults "
+                                             "files, repeatable, applied after the copter defaults (copter.parm "
+                                             "of the binary's ArduPilot tree, else preland's own)."),
+    tlog_dir: Optional[Path] = typer.Option(None, "--tlog-dir", help="With --sitl: one MAVLink telemetry log "
+                                            "(.tlog) per trial in this folder."),
+    executor: str = typer.Option("local", "--executor", help="Where trials run: local (worker processes on "
+                                 "this machine) or ray (tasks of a Ray cluster)."),
+    ray_address: Optional[str] = typer.Option(None, "--ray-address", metavar="ADDR",
+                                              help="With --executor ray: the cluster to join (auto, "
+                                                   "ray://host:10001, host:6379; default $RAY_ADDRESS, else a "
+                                                   "local Ray instance of --workers CPUs)."),
+    trial_cpus: float = typer.Option(1.0, "--trial-cpus", help="With --executor ray: CPUs each trial asks for."),
+    outcomes_only: bool = typer.Option(False, "--outcomes-only", help="Store only each trial's outcome row: no "
+                                       "event log, no trajectory (a much smaller store)."),
+) -> None:
+    """Run every trial of a campaign (embedded simulator, or SITL with --sitl), storing each as it finishes."""
+    import time
+
+    from ..campaign.driver import CampaignInterrupted, run_campaign
+    from ..campaign.executors import ExecutorError, ExecutorOptions, create_executor, executor_factory
+    from ..campaign.lease import CampaignBusy
+    from ..campaign.report import write_report
+    from ..campaign.spec import load_campaign
+
+    try:
+        campaign = load_campaign(campaign_file)
+    except PrelandError as error:
+        raise fail(str(error)) from None
+    check_sitl_speedup(sitl_speedup)
+    if workers is not None and workers < 1:
+        raise fail(f"--workers: must be >= 1, got {workers}")
+    if not trial_cpus > 0:
+        raise fail(f"--trial-cpus: must be > 0, got {trial_cpus:g}")
+    try:
+        factory = executor_factory(executor)
+    except ExecutorError as error:
+        raise fail(f"--executor: {error}") from None
+    if executor == "local" and (ray_address is not None or trial_cpus != 1.0):
+        raise fail(f"--{'ray-address' if ray_address is not None else 'trial-cpus'}: needs --executor ray")
+    sitl_options = None
+    if sitl is not None:
+        from ..runtime.sitl import SitlOptions, resolve_sitl_binary
+
+        try:
+            # Trials on other machines find the binary there: the path given, else each node's own
+            # $PRELAND_SITL_BINARY; on this machine it is checked now.
+            binary = ((Path(sitl) if sitl else None) if getattr(factory, "runs_elsewhere", False)
+                      else resolve_sitl_binary(sitl or None))
+            sitl_options = SitlOptions(binary=binary, speedup=sitl_speedup,
+                                       defaults=tuple(p.resolve() for p in sitl_defaults),
+                                       tlog_dir=tlog_dir.resolve() if tlog_dir else None)
+        except PrelandError as error:
+            raise fail(f"--sitl: {error}") from None
+    try:
+        trial_executor = create_executor(executor, ExecutorOptions(workers=workers, address=ray_address,
+                                                                   trial_cpus=trial_cpus))
+    except ExecutorError as error:
+        raise fail(f"--executor {executor}: {error}") from None
+    store = open_store(db, must_exist=False)
+    started = time.perf_counter()
+    failures: list[str] = []
+    try:
+        with progress_bar(enabled=not quiet) as advance:
+            def progress(done: int, total: int, record) -> None:
+                advance(done, total)
+                if record is not None and record.result.get("outcome") == "error":
+                    failures.append(f"{record.scenario} #{record.trial_index}: {record.result.get('message')}")
+
+            ran, total = run_campaign(campaign, store, resume=resume, progress=progress, sitl=sitl_options,
+                                      executor=trial_executor, outcomes_only=outcomes_only)
+    except CampaignInterrupted as error:
+        store.close()
+        typer.echo(f"preland: {error}", err=True)
+        raise typer.Exit(130) from None
+    except CampaignBusy as error:
+        store.close()
+        raise fail(str(error), code=EXIT_FAILED) from None
+    except ExecutorError as error:
+        store.close()
+        raise fail(f"--executor {executor}: {error}") from None
+    except PrelandError as error:
+        store.close()
+        raise fail(str(error)) from None
+    elapsed = time.perf_counter() - started
+    typer.echo(f"campaign {campaign.name}: {ran} trial(s) run, {total} in {db} ({elapsed:.1f} s)")
+    for line in failures:
+        typer.echo(f"  trial failed: {line}", err=True)
+    if report is not None:
+        for path in write_report(store, campaign.name, report):
+            typer.echo(f"wrote {path}")
+    store.close()
