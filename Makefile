@@ -22,7 +22,7 @@ fly: $(STAMP)
 	$(VENV)/bin/preland fly missions/thesis_square_land.yaml
 
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -n 4 --dist loadgroup
 
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/sim_speed.py

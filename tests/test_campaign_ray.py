@@ -27,7 +27,9 @@ from preland_app.runtime.sitl import SITL_ENV, SitlOptions
 from .conftest import ROOT
 from .test_campaign import QUICK, comparable, write_campaign
 
-pytestmark = pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find Ray's processes")
+# One module-wide local Ray instance: the module runs on one xdist worker.
+pytestmark = [pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find Ray's processes"),
+              pytest.mark.xdist_group("ray")]
 
 ROW = ("scenario", "trial_index", "seed", "outcome", "message")
 NODE_SITL = "/bin/false"  # the SITL binary this test's Ray node advertises: one that exits at once

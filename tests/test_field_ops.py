@@ -4,6 +4,7 @@ import asyncio
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from preland_app.config.mission import GeofenceSpec
 from preland_app.field.preflight import PreflightSpec
@@ -170,9 +171,10 @@ def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(the
     mission_path.write_text(text.replace("  mode: normal", "  mode: marker").replace(
         "pad:\n", "params:\n  PLND_ENABLED: 1\n  PLND_TYPE: 1\npad:\n").replace(
         "preset: thesis", "preset: thesis"))
-    # 3x wall speed: the camera renders, detects and records 90 frames per wall second, which a loaded
-    # 2-core machine still keeps up with (the preflight refuses a camera below 80 % of its rate).
-    served = ServedSimulator(thesis_mission, seed=2, speedup=3.0)
+    # Real time, as in the field: the camera renders, detects and records 30 frames per wall second, which a
+    # 2-core machine running other tests beside it keeps up with (the preflight refuses a camera below 80 %
+    # of its rate; at 3x, 90 frames per wall second, it measured 18.5 frames/s with other tests running).
+    served = ServedSimulator(thesis_mission, seed=2, speedup=1.0)
     served.simulator.params.set("PLND_ENABLED", 1)
     served.simulator.params.set("PLND_TYPE", 1)
     db, log, video = tmp_path / "field.db", tmp_path / "detections.csv", tmp_path / "flight.mkv"

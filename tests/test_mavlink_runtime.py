@@ -74,6 +74,7 @@ def test_thesis_mission_over_mavlink(thesis_mission, mode):
     assert 15.0 < outcome.landing_time_s < 40.0
 
 
+@pytest.mark.xdist_group("camera_in_real_time")
 @pytest.mark.parametrize("mode, faults", [
     ("marker", None), ("fused", None), ("cautious", {"marker": "below:3:first-attempt"}),
 ])
@@ -94,6 +95,7 @@ def test_camera_land_modes_over_mavlink(thesis_mission, mode, faults):
 
 
 @pytest.mark.parametrize("mode", ["paper_adaptive", "paper_static"])
+@pytest.mark.xdist_group("camera_in_real_time")
 def test_paper_algorithms_over_mavlink(mode):
     from preland_app.config.mission import load_mission
 
@@ -131,6 +133,7 @@ def test_lost_heartbeat_ends_the_trial_as_link_lost(thesis_mission):
     assert ended_at - silenced_at >= 3.5
 
 
+@pytest.mark.xdist_group("camera_in_real_time")
 def test_fault_commands_reach_the_flying_companion(thesis_mission):
     """PRELAND_FAULT_INJECTION sent with `preland fault send` changes the marker's faults mid-landing."""
     from typer.testing import CliRunner
