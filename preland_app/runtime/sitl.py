@@ -193,17 +193,13 @@ class GpsErrorDriver:
         while not vehicle.connected:
             await asyncio.sleep(0.05)
         clock = vehicle.clock
-        next_s = clock.now_s() + GPS_UPDATE_PERIOD_S
+        last_s = clock.now_s()
         while True:
-            await clock.sleep(max(next_s - clock.now_s(), 0.0))
-            # Fixed steps on a vehicle-time grid: the same seed gives the same error sequence however late
-            # the link delivers the vehicle's time.
-            params = self.params()
-            while clock.now_s() >= next_s:
-                params = self.step(GPS_UPDATE_PERIOD_S)
-                next_s += GPS_UPDATE_PERIOD_S
-            for name, value in params.items():
+            await clock.sleep(GPS_UPDATE_PERIOD_S)
+            now_s = clock.now_s()
+            for name, value in self.step(max(now_s - last_s, 0.0)).items():
                 await vehicle.set_param(name, value)
+            last_s = now_s
             self.updates += 1
 
 
