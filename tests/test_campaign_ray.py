@@ -281,3 +281,25 @@ def test_the_python_api_runs_a_campaign_on_ray(cluster, tmp_path):
     assert [(r["seed"], r["outcome"], r["landing_error_cm"]) for r in ray_rows] == \
         [(r["seed"], r["outcome"], r["landing_error_cm"]) for r in local_rows]
     assert {r["outcome"] for r in local_rows} == {"landed"}
+
+
+def test_a_ray_trial_runs_opencv_on_as_many_threads_as_cpus_it_asked_for(cluster):
+    """Ray sizes OMP_NUM_THREADS to a task's CPUs but not OpenCV's own pool, which would take the node's
+    every core; the task sets it before the trial."""
+    from preland_app.campaign.executors.ray import run_job_in_ray_worker
+    from preland_app.campaign.spec import resolve_scenarios
+    from preland_app.campaign.trials import plan_trials
+
+    campaign = load_campaign(ROOT / "campaigns" / "smoke.yaml")
+    job = next(plan_trials(campaign, resolve_scenarios(campaign), outcomes_only=True))
+
+    @ray.remote(num_cpus=1)
+    def trial_then_threads(job, threads):
+        import cv2
+
+        cv2.setNumThreads(8)  # what a fresh worker might have
+        record = run_job_in_ray_worker(job, opencv_threads=threads)
+        return record.result["outcome"], cv2.getNumThreads()
+
+    assert ray.get(trial_then_threads.remote(job, 1), timeout=120) == ("landed", 1)
+    assert ray.get(trial_then_threads.remote(job, 2), timeout=120) == ("landed", 2)

@@ -42,6 +42,16 @@ def check_reachable(address: str, *, timeout_s: float = REACH_TIMEOUT_S) -> None
         raise ExecutorError(f"cannot reach a Ray cluster at {address}: {reason}") from None
 
 
+def run_job_in_ray_worker(job: TrialJob, opencv_threads: int = 1) -> TrialRecord:
+    """`run_job` in a Ray worker, with OpenCV's thread pool sized to the CPUs the task asked for: Ray sizes
+    OMP_NUM_THREADS to them but not OpenCV's own pool, which would otherwise take every core of the node
+    and compete with the node's other trials."""
+    import cv2
+
+    cv2.setNumThreads(max(1, opencv_threads))
+    return run_job(job)
+
+
 def _ray():
     try:
         import ray
@@ -69,7 +79,7 @@ class RayExecutor(TrialExecutor):
     def start(self) -> None:
         ray = self._ray
         if ray.is_initialized():  # a caller (a notebook, a test) already joined a cluster: use it, leave it up
-            self._task = ray.remote(run_job)
+            self._task = ray.remote(run_job_in_ray_worker)
             self._check_trial_cpus()
             return
         address = self.options.address or os.environ.get("RAY_ADDRESS") or None
@@ -91,7 +101,7 @@ class RayExecutor(TrialExecutor):
             raise ExecutorError(f"cannot start or join {where}: {type(error).__name__}: "
                                 f"{str(error).strip().splitlines()[0] if str(error).strip() else ''}") from None
         self._started_ray = True
-        self._task = ray.remote(run_job)
+        self._task = ray.remote(run_job_in_ray_worker)
         try:
             self._check_trial_cpus()
         except ExecutorError:
@@ -127,7 +137,8 @@ class RayExecutor(TrialExecutor):
                 self._check_sitl_nodes()
             resources = {self.options.sitl_resource: 1}
         ref = self._task.options(num_cpus=self.options.trial_cpus, resources=resources,
-                                 max_retries=WORKER_DEATH_RETRIES, retry_exceptions=False).remote(job)
+                                 max_retries=WORKER_DEATH_RETRIES, retry_exceptions=False).remote(
+            job, opencv_threads=max(1, int(self.options.trial_cpus)))
         self._refs[ref] = job
 
     def completed(self, timeout_s: float) -> list[TrialRecord]:
