@@ -107,6 +107,11 @@ _BUILT_IN = (
         name="wind.turbulence_w20_m_s", low=0.0, high=10.0, unit="m/s",
         source="MIL-F-8785C light turbulence (W20 = 15 knots is light); the campaign files' values have none"),
     CalibratableParameter(
+        # Bounded by half the rotors' induced velocity in hover (momentum theory: 5.7 m/s for a 2.5 kg
+        # hexacopter on 10-inch propellers), the speed of the wash that recirculates.
+        name="ground_effect.sigma_m_s", low=0.0, high=3.0, unit="m/s",
+        source="none: 0 (off); recirculating rotor wash below ground_effect.height_m (see README)"),
+    CalibratableParameter(
         name="airframe.drag_per_s", low=0.1, high=1.0, unit="1/s",
         source="none: a linear drag typical of a 1.5 kg quadcopter"),
     CalibratableParameter(

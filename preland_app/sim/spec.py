@@ -35,6 +35,29 @@ class WindSpec:
 
 
 @dataclass(frozen=True)
+class GroundEffectSpec:
+    """Rotor wash recirculating near the ground, felt as a horizontal air velocity (NED, m/s).
+
+    A rotor near the ground sends its wash outward along it, and part of it recirculates through the
+    rotors unevenly, so a hovering or descending vehicle is pushed about at random in the last part of a
+    landing. Modelled as a first-order Gauss-Markov velocity per horizontal axis with time constant
+    `tau_s`, whose standard deviation is `sigma_m_s` at the ground and falls linearly to 0 at `height_m`.
+    `height_m` 0.5: ground effect on a rotor's thrust is below 1.6 % beyond two rotor radii and fades by
+    four (Cheeseman & Bennett, 1955), four radii of the 10-inch propellers of a thesis-sized hexacopter.
+    No source gives the lateral velocity's size: `sigma_m_s` is 0 (off) by default and calibratable.
+    """
+
+    sigma_m_s: float = 0.0
+    height_m: float = 0.5
+    tau_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        _require(self.sigma_m_s >= 0, "sigma_m_s", "must be >= 0")
+        _require(self.height_m > 0, "height_m", "must be > 0")
+        _require(self.tau_s > 0, "tau_s", "must be > 0")
+
+
+@dataclass(frozen=True)
 class NavigationSpec:
     """Errors of the vehicle's own position estimate (what a GPS+EKF autopilot believes).
 
@@ -123,6 +146,7 @@ class EnvironmentSpec:
     """Everything about the simulated world a mission or scenario may override."""
 
     wind: WindSpec = field(default_factory=WindSpec)
+    ground_effect: GroundEffectSpec = field(default_factory=GroundEffectSpec)
     navigation: NavigationSpec = field(default_factory=NavigationSpec)
     airframe: AirframeSpec = field(default_factory=AirframeSpec)
     physics_rate_hz: float = 100.0
