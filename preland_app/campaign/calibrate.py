@@ -173,21 +173,9 @@ def check_effective(flyer: Flyer, parameters: list[CalibratableParameter], fitte
 
 def run_jobs(executor: TrialExecutor, jobs: list[TrialJob], on_record: Callable[[TrialRecord], None]) -> None:
     """Run `jobs` on a started executor, a window of them in flight at a time, handing each record over."""
-    from .driver import WINDOW_PER_SLOT
+    from .driver import run_windowed
 
-    pending = iter(jobs)
-    in_flight, more = 0, True
-    while more or in_flight:
-        while more and in_flight < WINDOW_PER_SLOT * executor.slots():
-            job = next(pending, None)
-            if job is None:
-                more = False
-                break
-            executor.submit(job)
-            in_flight += 1
-        for record in executor.completed(timeout_s=POLL_S):
-            in_flight -= 1
-            on_record(record)
+    run_windowed(executor, iter(jobs), on_record=on_record, poll_s=POLL_S)
 
 
 def _outcomes(records: list[TrialRecord]) -> tuple[list[float], list[float], int]:

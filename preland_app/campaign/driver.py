@@ -90,32 +90,44 @@ def _check_store(campaign: CampaignSpec, scenarios, store: ResultsStore, *, sour
     return done
 
 
+def run_windowed(executor: TrialExecutor, jobs: Iterator[TrialJob], *, on_record: Callable[[TrialRecord], None],
+                 poll_s: float, on_poll: Callable[[], None] | None = None) -> None:
+    """Run `jobs` on a started executor, WINDOW_PER_SLOT per slot in flight at a time, handing each record to
+    `on_record` as it arrives; `on_poll` runs after every wait of at most `poll_s` seconds for results."""
+    in_flight, more = 0, True
+    while more or in_flight:
+        while more and in_flight < WINDOW_PER_SLOT * executor.slots():
+            job = next(jobs, None)
+            if job is None:
+                more = False
+                break
+            executor.submit(job)
+            in_flight += 1
+        for record in executor.completed(timeout_s=poll_s):
+            in_flight -= 1
+            on_record(record)
+        if on_poll is not None:
+            on_poll()
+
+
 def _drive(pending: Iterator[TrialJob], executor: TrialExecutor, store: ResultsStore, lease: DriverLease, *,
            finished: int, total: int, progress: Progress | None) -> int:
-    ran = in_flight = 0
-    more = True
+    ran = 0
+
+    def commit(record: TrialRecord) -> None:
+        nonlocal ran, finished
+        try:
+            store.add_trial(record)
+        except DuplicateTrial:
+            lease.refresh(force=True)  # another driver took the campaign over: that names it
+            raise
+        ran += 1
+        finished += 1
+        if progress:
+            progress(finished, total, record)
+
     try:
-        while more or in_flight:
-            window = WINDOW_PER_SLOT * executor.slots()
-            while more and in_flight < window:
-                job = next(pending, None)
-                if job is None:
-                    more = False
-                    break
-                executor.submit(job)
-                in_flight += 1
-            for record in executor.completed(timeout_s=HEARTBEAT_PERIOD_S):
-                in_flight -= 1
-                try:
-                    store.add_trial(record)
-                except DuplicateTrial:
-                    lease.refresh(force=True)  # another driver took the campaign over: that names it
-                    raise
-                ran += 1
-                finished += 1
-                if progress:
-                    progress(finished, total, record)
-            lease.refresh()
+        run_windowed(executor, pending, on_record=commit, poll_s=HEARTBEAT_PERIOD_S, on_poll=lease.refresh)
     except KeyboardInterrupt:
         executor.cancel()
         raise CampaignInterrupted(done=finished, total=total) from None
