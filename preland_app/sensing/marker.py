@@ -51,6 +51,48 @@ def detector_parameters() -> cv2.aruco.DetectorParameters:
     return parameters
 
 
+@dataclass(frozen=True, slots=True)
+class _SubPixRefinement:
+    """OpenCV's CORNER_REFINE_SUBPIX, done here on a patch anchored at the marker.
+
+    OpenCV refines in the coordinates of the image it was given. For a small
+    marker its window is 1 px, where cornerSubPix is ill-conditioned: float32
+    rounding of the corners' absolute coordinates then moves a corner by up to
+    0.84 px (measured: the same frame, cropped 99 px further right). Refining in
+    a patch whose origin is fixed to the marker's pixels makes the corners the
+    same wherever the marker lies in the image searched, with OpenCV's own window
+    rule (relative to the module size, at most cornerRefinementWinSize) and
+    stopping criteria."""
+
+    relative_window: float
+    max_window_px: int
+    max_iterations: int
+    min_accuracy_px: float
+    modules: int
+
+    def refine(self, gray: np.ndarray, corners_px: np.ndarray) -> np.ndarray:
+        """`corners_px` (4x2, float32, pixels of `gray`) refined, as float64."""
+        (ax, ay), (bx, by), (cx, cy), (dx, dy) = corners_px.tolist()
+        f32 = np.float32
+        # OpenCV's average module size: the four side lengths summed in float32, in its order.
+        perimeter = f32(0.0)
+        for ex, ey in ((ax - bx, ay - by), (bx - cx, by - cy), (cx - dx, cy - dy), (dx - ax, dy - ay)):
+            perimeter = f32(perimeter + f32(math.sqrt(f32(f32(f32(ex) * f32(ex)) + f32(f32(ey) * f32(ey))))))
+        module_px = float(perimeter / f32(4 * self.modules))
+        window = min(self.max_window_px, max(1, round(self.relative_window * module_px)))
+        reach = window + 8
+        height, width = gray.shape[:2]
+        x0 = max(0, math.floor(min(ax, bx, cx, dx)) - reach)
+        y0 = max(0, math.floor(min(ay, by, cy, dy)) - reach)
+        x1 = min(width, math.ceil(max(ax, bx, cx, dx)) + reach + 1)
+        y1 = min(height, math.ceil(max(ay, by, cy, dy)) + reach + 1)
+        local = np.array([[ax - x0, ay - y0], [bx - x0, by - y0], [cx - x0, cy - y0], [dx - x0, dy - y0]],
+                         dtype=np.float32).reshape(4, 1, 2)
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, self.max_iterations, self.min_accuracy_px)
+        cv2.cornerSubPix(gray[y0:y1, x0:x1], local, (window, window), (-1, -1), criteria)
+        return local.reshape(4, 2).astype(np.float64) + (x0, y0)
+
+
 class MarkerDetector:
     """Finds the pad's markers in an image and estimates each one's pose."""
 
@@ -58,7 +100,23 @@ class MarkerDetector:
                  parameters: cv2.aruco.DetectorParameters | None = None) -> None:
         self.pad = pad
         self.camera = camera
-        self.detector = cv2.aruco.ArucoDetector(aruco_dictionary(pad.dictionary), parameters or detector_parameters())
+        parameters = parameters or detector_parameters()
+        dictionary = aruco_dictionary(pad.dictionary)
+        self._refinement: _SubPixRefinement | None = None
+        if parameters.cornerRefinementMethod == cv2.aruco.CORNER_REFINE_SUBPIX:
+            self._refinement = _SubPixRefinement(
+                relative_window=float(parameters.relativeCornerRefinmentWinSize),
+                max_window_px=int(parameters.cornerRefinementWinSize),
+                max_iterations=int(parameters.cornerRefinementMaxIterations),
+                min_accuracy_px=float(parameters.cornerRefinementMinAccuracy),
+                modules=dictionary.markerSize + 2 * int(parameters.markerBorderBits))
+            unrefined = cv2.aruco.DetectorParameters()
+            for name in dir(parameters):
+                if not name.startswith("_") and not callable(getattr(parameters, name)):
+                    setattr(unrefined, name, getattr(parameters, name))
+            unrefined.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+            parameters = unrefined
+        self.detector = cv2.aruco.ArucoDetector(dictionary, parameters)
         self._k = camera.camera_matrix
         self._dist = camera.dist_coeffs
         self._markers = {m.id: m for m in pad.markers}
@@ -80,14 +138,17 @@ class MarkerDetector:
 
     def detect(self, image: np.ndarray) -> list[MarkerDetection]:
         """All of the pad's markers found in `image` (grayscale or BGR), with poses."""
-        corners, ids, _ = self.detector.detectMarkers(_gray(image))
-        return self._poses(corners, ids, offset=(0.0, 0.0))
+        gray = _gray(image)
+        corners, ids, _ = self.detector.detectMarkers(gray)
+        return self._poses(gray, corners, ids, offset=(0.0, 0.0))
 
     def detect_frame(self, frame) -> list[MarkerDetection]:
         """`detect` on a camera frame (`Frame`, or a virtual camera's frame, drawn as it is read)."""
         return self.detect(frame.image)
 
-    def _poses(self, corners, ids, *, offset: tuple[float, float]) -> list[MarkerDetection]:
+    def _poses(self, gray: np.ndarray, corners, ids, *, offset: tuple[float, float]) -> list[MarkerDetection]:
+        """Poses of the pad's markers among `corners` (pixels of `gray`, whose origin is at `offset` in the
+        frame), refined to sub-pixel first when the parameters ask for it."""
         if ids is None:
             return []
         detections = []
@@ -96,7 +157,11 @@ class MarkerDetector:
             marker = self._markers.get(marker_id)
             if marker is None:
                 continue
-            image_points = marker_corners.reshape(4, 2).astype(np.float64) + shift
+            found = marker_corners.reshape(4, 2)
+            if self._refinement is not None:
+                image_points = self._refinement.refine(gray, found) + shift
+            else:
+                image_points = found.astype(np.float64) + shift
             ok, rvec, tvec = cv2.solvePnP(self._object_points[marker_id], image_points, self._k, self._dist,
                                           flags=cv2.SOLVEPNP_IPPE_SQUARE)
             if not ok or tvec[2, 0] <= 0:
@@ -140,18 +205,37 @@ class TrackingMarkerDetector(MarkerDetector):
     def detect_frame(self, frame) -> list[MarkerDetection]:
         self._frames += 1
         width, height = frame.size_px
+        frame_side_px = max(width, height)
+        # A virtual camera's frame knows where it draws the pad; beyond that box (and the margin the detector
+        # reads around a marker) there is only ground, where no marker can be found, so no search goes beyond
+        # it, nor is any pixel drawn there.
+        extent = getattr(frame, "pad_extent_px", None)
+        bounds = None
+        if extent is not None:
+            bounds = self._box_around(extent, (height, width))
+            if bounds is None:
+                self._window = None
+                return []
         detections: list[MarkerDetection] = []
         if self._window is not None and self._frames % self.full_frame_every != 0:
-            x0, y0, x1, y1 = self._window
-            corners, ids, _ = self._window_detector_for(x1 - x0, y1 - y0, max(width, height)).detectMarkers(
-                _gray(frame.region(x0, y0, x1, y1)))
-            detections = self._poses(corners, ids, offset=(float(x0), float(y0)))
-            if detections:
-                self.window_hits += 1
+            window = self._window if bounds is None else _intersection(self._window, bounds)
+            if window is not None:
+                detections = self._detect_in(frame, window, frame_side_px)
+                if detections:
+                    self.window_hits += 1
         if not detections:
-            detections = super().detect(frame.image)
+            if bounds is None or bounds == (0, 0, width, height):
+                detections = super().detect(frame.image)
+            else:
+                detections = self._detect_in(frame, bounds, frame_side_px)
         self._window = self._window_around(detections, (height, width)) if detections else None
         return detections
+
+    def _detect_in(self, frame, region: tuple[int, int, int, int], frame_side_px: int) -> list[MarkerDetection]:
+        x0, y0, x1, y1 = region
+        gray = _gray(frame.region(x0, y0, x1, y1))
+        corners, ids, _ = self._window_detector_for(x1 - x0, y1 - y0, frame_side_px).detectMarkers(gray)
+        return self._poses(gray, corners, ids, offset=(float(x0), float(y0)))
 
     def _window_detector_for(self, width_px: int, height_px: int, frame_side_px: int) -> cv2.aruco.ArucoDetector:
         """The window's detector, with the marker perimeter limits of the whole frame in pixels."""
@@ -164,15 +248,31 @@ class TrackingMarkerDetector(MarkerDetector):
     def _window_around(self, detections: list[MarkerDetection], shape) -> tuple[int, int, int, int] | None:
         points = np.vstack([d.corners_px for d in detections])
         (x_min, y_min), (x_max, y_max) = points.min(axis=0), points.max(axis=0)
+        window = self._box_around((x_min, y_min, x_max, y_max), shape)
+        height, width = shape[:2]
+        if window is None or (window[2] - window[0]) * (window[3] - window[1]) > 0.6 * width * height:
+            return None  # the window would be most of the frame: search the frame
+        return window
+
+    def _box_around(self, extent, shape) -> tuple[int, int, int, int] | None:
+        """Twice `extent` (x0, y0, x1, y1; px) about its centre plus the margin, clipped to the frame; None
+        when that misses the frame. (OpenCV's detector can miss a marker that fills much of the image it is
+        given, so a search region is never cut tight around what it looks for.)"""
+        x_min, y_min, x_max, y_max = extent
         half_w = (x_max - x_min) + self.margin_px
         half_h = (y_max - y_min) + self.margin_px
         cx, cy = (x_min + x_max) / 2.0, (y_min + y_max) / 2.0
         height, width = shape[:2]
         x0, x1 = max(0, int(cx - half_w)), min(width, int(cx + half_w) + 1)
         y0, y1 = max(0, int(cy - half_h)), min(height, int(cy + half_h) + 1)
-        if (x1 - x0) * (y1 - y0) > 0.6 * width * height:
-            return None  # the window would be most of the frame: search the frame
+        if x1 <= x0 or y1 <= y0:
+            return None
         return x0, y0, x1, y1
+
+
+def _intersection(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, int, int, int] | None:
+    x0, y0, x1, y1 = max(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), min(a[3], b[3])
+    return (x0, y0, x1, y1) if x0 < x1 and y0 < y1 else None
 
 
 def _gray(image: np.ndarray) -> np.ndarray:

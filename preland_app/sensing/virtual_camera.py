@@ -23,6 +23,7 @@ _BACKGROUND_EXTENT_M = 80.0
 _BACKGROUND_PX_PER_M = 24.0
 _PAD_MAX_PX_PER_M = 1600.0
 _MIN_LENS_HEIGHT_M = 0.08
+_MAP_STEP_PX = 8
 
 
 @dataclass(frozen=True)
@@ -69,12 +70,16 @@ def camera_extrinsics(camera: CameraModel, pose: CameraPose) -> tuple[np.ndarray
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Shot:
     """One frame as captured, before any pixel is drawn: image -> texture homographies (px) of the
-    background and of the pad's pyramid level, and the sensor-noise draw (bank index, row, column offset)."""
+    background and of the pad's pyramid level, the sensor-noise draw (bank index, row, column offset), and
+    `pad_extent_px`: the box (x0, y0, x1, y1; image px, unclipped, so possibly off the image) that holds
+    every pixel the pad (its printed sheet, markers and all) is drawn into, or None when it cannot be
+    bounded (part of the pad behind the camera, or too small to bound through the lens distortion)."""
 
     image_to_background: np.ndarray
     image_to_pad: np.ndarray
     pad_texture: np.ndarray
     noise: tuple[int, int, int] | None
+    pad_extent_px: tuple[float, float, float, float] | None = None
 
 
 class VirtualCamera:
@@ -101,6 +106,19 @@ class VirtualCamera:
         self._background = self._make_background(rng)
         self._pad_levels = self._make_pad_pyramid(pad)
         self._undistort_maps = self._make_distortion_maps() if camera.has_distortion else None
+        self._pad_outline = _pad_outline_m(pad)
+        # The sources in the ideal image of every 8th pixel (and the last row and column), to bound where lens
+        # distortion draws a region; a box narrower than twice their widest spacing is not bounded.
+        self._map_samples = None
+        if self._undistort_maps is not None:
+            w, h = self._size
+            cols = np.unique(np.r_[np.arange(0, w, _MAP_STEP_PX), w - 1])
+            rows = np.unique(np.r_[np.arange(0, h, _MAP_STEP_PX), h - 1])
+            map_x, map_y = (m[np.ix_(rows, cols)] for m in self._undistort_maps)
+            # Sources beyond the ideal image read it reflected (cv2.BORDER_REFLECT, as `render_shot` remaps).
+            map_x, map_y = _reflected(map_x, w), _reflected(map_y, h)
+            spacing = max(float(np.abs(np.diff(map_x, axis=1)).max()), float(np.abs(np.diff(map_y, axis=0)).max()))
+            self._map_samples = (map_x, map_y, rows, cols, spacing)
         h, w = camera.height_px + 32, camera.width_px + 32
         # OpenCV's Gaussian kernel for 8-bit images reaches round(3 sigma) px; one more for rounding.
         self._blur_radius_px = math.ceil(3.0 * effects.blur_px) + 1 if effects.blur_px > 0 else 0
@@ -185,6 +203,7 @@ class VirtualCamera:
                                         [0.0, 0.0, 1.0]])
         rotate = np.array([[c, -s, self.pad_origin_ned_m[0]], [s, c, self.pad_origin_ned_m[1]], [0.0, 0.0, 1.0]])
         image_to_pad = np.linalg.inv(ground_to_image @ rotate @ pad_to_ground_local)
+        pad_to_image = ground_to_image @ rotate
         noise = None
         if self.effects.noise_sigma > 0:
             # Sensor noise: one of a bank of pre-drawn noise fields, shifted by a random offset
@@ -192,7 +211,36 @@ class VirtualCamera:
             index = int(self._rng.integers(len(self._noise_bank)))
             dy, dx = (int(v) for v in self._rng.integers(0, 32, size=2))
             noise = (index, dy, dx)
-        return Shot(image_to_background=image_to_bg, image_to_pad=image_to_pad, pad_texture=texture, noise=noise)
+        return Shot(image_to_background=image_to_bg, image_to_pad=image_to_pad, pad_texture=texture, noise=noise,
+                    pad_extent_px=self._pad_extent_px(pad_to_image))
+
+    def _pad_extent_px(self, pad_to_image: np.ndarray) -> tuple[float, float, float, float] | None:
+        """The image box the pad is drawn into (see `Shot`). Straight edges stay straight in the
+        ideal image, so the corners bound them there; lens distortion is bounded through its sampled maps,
+        one sampling step wider on each side."""
+        outline = self._pad_outline
+        projected = pad_to_image @ np.vstack([outline.T, np.ones(len(outline))])
+        if projected[2].min() <= 1e-6:
+            return None
+        u, v = projected[0] / projected[2], projected[1] / projected[2]
+        # A pixel reads the texture up to a pixel around it (bilinear warp); a corner may also round outwards.
+        # Blur spreads them by its kernel's reach.
+        spread = 2.0 + self._blur_radius_px
+        box = (float(u.min()) - spread, float(v.min()) - spread, float(u.max()) + spread, float(v.max()) + spread)
+        if self._map_samples is None:
+            return box
+        map_x, map_y, rows, cols, spacing = self._map_samples
+        if box[2] - box[0] < 2.0 * spacing or box[3] - box[1] < 2.0 * spacing:
+            return None
+        box = (box[0] + self._blur_radius_px, box[1] + self._blur_radius_px,  # blur is applied after the lens
+               box[2] - self._blur_radius_px, box[3] - self._blur_radius_px)
+        inside = (map_x >= box[0]) & (map_x <= box[2]) & (map_y >= box[1]) & (map_y <= box[3])
+        if not inside.any():
+            return -1.0, -1.0, -1.0, -1.0  # wholly outside the frame
+        hit_rows, hit_cols = np.nonzero(inside)
+        reach = _MAP_STEP_PX + self._blur_radius_px
+        return (float(cols[hit_cols.min()] - reach), float(rows[hit_rows.min()] - reach),
+                float(cols[hit_cols.max()] + reach), float(rows[hit_rows.max()] + reach))
 
     def render(self, pose: CameraPose) -> np.ndarray:
         """One grayscale frame (height x width, uint8) seen from `pose`."""
@@ -287,7 +335,30 @@ class RenderedFrame:
     def size_px(self) -> tuple[int, int]:
         return self._renderer.camera.width_px, self._renderer.camera.height_px
 
+    def preset_image(self, image: np.ndarray) -> None:
+        """Take `image` as this frame's drawing (the whole frame, already drawn from the same shot)."""
+        self._image = image
+
+    @property
+    def pad_extent_px(self) -> tuple[float, float, float, float] | None:
+        """The box the pad is drawn into (x0, y0, x1, y1; image px, unclipped), or None when the frame cannot
+        bound it: nothing beyond it shows a marker."""
+        return self._shot.pad_extent_px
+
     def region(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
         if self._image is not None:
             return np.ascontiguousarray(self._image[y0:y1, x0:x1])
         return self._renderer.render_shot(self._shot, (x0, y0, x1, y1))
+
+
+def _pad_outline_m(pad: PadSpec) -> np.ndarray:
+    """The corners of the pad's printed sheet, pad frame (north, east) in m, one row each."""
+    half = pad.size_m / 2.0
+    return np.array([[half, -half], [half, half], [-half, half], [-half, -half]])
+
+
+def _reflected(coordinates: np.ndarray, size_px: int) -> np.ndarray:
+    """Pixel coordinates folded into 0..size_px-1 as cv2.BORDER_REFLECT folds them (edge pixel repeated)."""
+    period = 2.0 * size_px
+    folded = np.mod(coordinates + 0.5, period)
+    return np.where(folded < size_px, folded, period - folded) - 0.5
