@@ -155,8 +155,11 @@ def test_the_pad_is_drawn_only_inside_its_extent(camera, effects):
         if extent is None:
             continue
         bounded += 1
-        if changed.size == 0:
+        if extent == ():
+            assert changed.size == 0
             outside += 1
+            continue
+        if changed.size == 0:
             continue
         rows, cols = changed[:, 0], changed[:, 1]
         assert extent[0] <= cols.min() and cols.max() <= extent[2]
@@ -214,3 +217,32 @@ def test_corners_do_not_depend_on_where_the_marker_lies_in_the_image_searched():
     assert worst_shift_px <= 1e-3
     assert len(against_opencv) > 80 and np.median(against_opencv) <= 1e-3
     assert np.mean(np.array(against_opencv) <= 1e-3) >= 0.95
+
+
+@pytest.mark.parametrize("camera", [RPI_CAMERA_V2_640X480, DISTORTED], ids=["pinhole", "distorted"])
+def test_every_marker_the_whole_frame_shows_lies_inside_the_markers_extent(camera):
+    from preland_app.sensing.pad import THESIS_PAD
+
+    for pad in (PAPER_PAD, THESIS_PAD):
+        renderer = VirtualCamera(camera=camera, pad=pad, pad_origin_ned_m=(0.2, 0.1), pad_yaw_deg=-40.0,
+                                 rng=np.random.default_rng(4))
+        detector = MarkerDetector(pad=pad, camera=camera)
+        poses = np.random.default_rng(8)
+        found = none_in_view = 0
+        for _ in range(60):
+            pose = CameraPose(float(poses.uniform(-2.5, 2.5)), float(poses.uniform(-2.5, 2.5)),
+                              -float(poses.uniform(0.5, 8)), float(poses.uniform(-0.15, 0.15)),
+                              float(poses.uniform(-0.15, 0.15)), float(poses.uniform(-3, 3)))
+            shot = renderer.capture(pose)
+            detections = detector.detect(renderer.render_shot(shot))
+            extent = shot.markers_extent_px
+            if extent == ():
+                none_in_view += 1
+                assert detections == []
+                continue
+            found += bool(detections)
+            for detection in detections:
+                if extent is not None:
+                    assert (detection.corners_px.min(axis=0) >= extent[:2]).all()
+                    assert (detection.corners_px.max(axis=0) <= extent[2:]).all()
+        assert found >= 10 and none_in_view >= 3

@@ -206,13 +206,13 @@ class TrackingMarkerDetector(MarkerDetector):
         self._frames += 1
         width, height = frame.size_px
         frame_side_px = max(width, height)
-        # A virtual camera's frame knows where it draws the pad; beyond that box (and the margin the detector
-        # reads around a marker) there is only ground, where no marker can be found, so no search goes beyond
-        # it, nor is any pixel drawn there.
-        extent = getattr(frame, "pad_extent_px", None)
+        # A virtual camera's frame knows where it draws the markers that can be found (those wholly in the
+        # frame); beyond them there is only ground and cut-off markers, where the detector finds nothing, so
+        # no search goes beyond them, nor is any pixel drawn there; a frame with none is not searched.
+        extent = getattr(frame, "markers_extent_px", None)
         bounds = None
         if extent is not None:
-            bounds = self._box_around(extent, (height, width))
+            bounds = self._box_around(extent, (height, width)) if extent else None
             if bounds is None:
                 self._window = None
                 return []

@@ -73,13 +73,18 @@ class Shot:
     background and of the pad's pyramid level, the sensor-noise draw (bank index, row, column offset), and
     `pad_extent_px`: the box (x0, y0, x1, y1; image px, unclipped, so possibly off the image) that holds
     every pixel the pad (its printed sheet, markers and all) is drawn into, or None when it cannot be
-    bounded (part of the pad behind the camera, or too small to bound through the lens distortion)."""
+    bounded (part of the pad behind the camera, or too small to bound through the lens distortion); () when
+    no part of it is in the frame. `markers_extent_px`: the same for the markers a detector can find, those
+    wholly in the frame (OpenCV rejects any candidate that reaches the image's border); through lens
+    distortion, the pad's extent.
+    """
 
     image_to_background: np.ndarray
     image_to_pad: np.ndarray
     pad_texture: np.ndarray
     noise: tuple[int, int, int] | None
-    pad_extent_px: tuple[float, float, float, float] | None = None
+    pad_extent_px: tuple[float, float, float, float] | tuple[()] | None = None
+    markers_extent_px: tuple[float, float, float, float] | tuple[()] | None = None
 
 
 class VirtualCamera:
@@ -107,6 +112,7 @@ class VirtualCamera:
         self._pad_levels = self._make_pad_pyramid(pad)
         self._undistort_maps = self._make_distortion_maps() if camera.has_distortion else None
         self._pad_outline = _pad_outline_m(pad)
+        self._markers_corners_pad = np.vstack([pad.marker_corners_pad_m(marker) for marker in pad.markers])
         # The sources in the ideal image of every 8th pixel (and the last row and column), to bound where lens
         # distortion draws a region; a box narrower than twice their widest spacing is not bounded.
         self._map_samples = None
@@ -212,9 +218,32 @@ class VirtualCamera:
             dy, dx = (int(v) for v in self._rng.integers(0, 32, size=2))
             noise = (index, dy, dx)
         return Shot(image_to_background=image_to_bg, image_to_pad=image_to_pad, pad_texture=texture, noise=noise,
-                    pad_extent_px=self._pad_extent_px(pad_to_image))
+                    pad_extent_px=(pad_extent := self._pad_extent_px(pad_to_image)),
+                    markers_extent_px=pad_extent if self._map_samples is not None else self._markers_extent_px(
+                        pad_to_image))
 
-    def _pad_extent_px(self, pad_to_image: np.ndarray) -> tuple[float, float, float, float] | None:
+    def _markers_extent_px(self, pad_to_image: np.ndarray) -> tuple[float, float, float, float] | tuple[()]:
+        """The box (pinhole image px) drawn into by the markers wholly in the frame; () when there are none."""
+        corners = self._markers_corners_pad
+        projected = pad_to_image @ np.vstack([corners.T, np.ones(len(corners))])
+        w, h = self._size
+        spread = 2.0 + self._blur_radius_px
+        box = None
+        for start in range(0, len(corners), 4):
+            depth = projected[2, start:start + 4]
+            if depth.min() <= 1e-6:
+                continue
+            u, v = projected[0, start:start + 4] / depth, projected[1, start:start + 4] / depth
+            u0, v0, u1, v1 = float(u.min()), float(v.min()), float(u.max()), float(v.max())
+            if u0 < -1.0 or v0 < -1.0 or u1 > w or v1 > h:
+                continue  # reaches past the frame's edge: no detector finds it
+            box = (u0, v0, u1, v1) if box is None else (min(box[0], u0), min(box[1], v0),
+                                                         max(box[2], u1), max(box[3], v1))
+        if box is None:
+            return ()
+        return box[0] - spread, box[1] - spread, box[2] + spread, box[3] + spread
+
+    def _pad_extent_px(self, pad_to_image: np.ndarray) -> tuple[float, float, float, float] | tuple[()] | None:
         """The image box the pad is drawn into (see `Shot`). Straight edges stay straight in the
         ideal image, so the corners bound them there; lens distortion is bounded through its sampled maps,
         one sampling step wider on each side."""
@@ -228,7 +257,8 @@ class VirtualCamera:
         spread = 2.0 + self._blur_radius_px
         box = (float(u.min()) - spread, float(v.min()) - spread, float(u.max()) + spread, float(v.max()) + spread)
         if self._map_samples is None:
-            return box
+            w, h = self._size
+            return () if box[2] < 0 or box[3] < 0 or box[0] > w or box[1] > h else box
         map_x, map_y, rows, cols, spacing = self._map_samples
         if box[2] - box[0] < 2.0 * spacing or box[3] - box[1] < 2.0 * spacing:
             return None
@@ -236,7 +266,7 @@ class VirtualCamera:
                box[2] - self._blur_radius_px, box[3] - self._blur_radius_px)
         inside = (map_x >= box[0]) & (map_x <= box[2]) & (map_y >= box[1]) & (map_y <= box[3])
         if not inside.any():
-            return -1.0, -1.0, -1.0, -1.0  # wholly outside the frame
+            return ()  # wholly outside the frame
         hit_rows, hit_cols = np.nonzero(inside)
         reach = _MAP_STEP_PX + self._blur_radius_px
         return (float(cols[hit_cols.min()] - reach), float(rows[hit_rows.min()] - reach),
@@ -340,10 +370,10 @@ class RenderedFrame:
         self._image = image
 
     @property
-    def pad_extent_px(self) -> tuple[float, float, float, float] | None:
-        """The box the pad is drawn into (x0, y0, x1, y1; image px, unclipped), or None when the frame cannot
-        bound it: nothing beyond it shows a marker."""
-        return self._shot.pad_extent_px
+    def markers_extent_px(self) -> tuple[float, float, float, float] | tuple[()] | None:
+        """The box (x0, y0, x1, y1; image px, unclipped) holding every marker a detector can find in this
+        frame, () when there is none, None when the frame cannot say (see `Shot`)."""
+        return self._shot.markers_extent_px
 
     def region(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
         if self._image is not None:
