@@ -119,8 +119,9 @@ def fidelity_rows(summaries, profile: ProfileSpec | None) -> list[tuple[str, ...
         note = ""
         score = profile.provenance.score_of(s.scenario) if profile and profile.provenance else None
         if score is not None and not score.inside:
-            note = (f"the fit could not bring it inside (profile: {score.sim_mean_cm:.1f} cm against "
-                    f"{score.field_min_cm:.1f}..{score.field_max_cm:.1f})")
+            fit_said = f"{score.sim_mean_cm:.1f} cm against {score.field_min_cm:.1f}..{score.field_max_cm:.1f}"
+            note = (f"inside in this run, not in the fit's own scoring trials ({fit_said})" if inside == "inside"
+                    else f"the fit could not bring it inside (profile: {fit_said})")
         rows.append((s.scenario, role, "" if mean is None else f"{mean:.1f}",
                      "" if published_mean is None else f"{published_mean:.1f}",
                      "" if low is None or high is None else f"{low:.1f}..{high:.1f}", inside, distance,
