@@ -54,12 +54,18 @@ def test_a_region_is_the_whole_frame_cropped_there(camera, effects):
     assert differing <= 0.002 * compared
 
 
-def test_a_frame_is_drawn_only_when_read():
+def _recording_renderer():
+    """A virtual camera over the paper pad, and the list of the regions it draws (None: the whole frame)."""
     renderer = VirtualCamera(camera=RPI_CAMERA_V2_640X480, pad=PAPER_PAD, pad_origin_ned_m=(0.0, 0.0),
                              rng=np.random.default_rng(2))
     drawn = []
     render_shot = renderer.render_shot
     renderer.render_shot = lambda shot, region=None: drawn.append(region) or render_shot(shot, region)
+    return renderer, drawn
+
+
+def test_a_frame_is_drawn_only_when_read():
+    renderer, drawn = _recording_renderer()
     frame = RenderedFrame(renderer=renderer, shot=renderer.capture(CameraPose(0, 0, -5, 0, 0, 0)),
                           capture_time_s=0.0, index=0)
     assert drawn == []
@@ -168,11 +174,7 @@ def test_the_pad_is_drawn_only_inside_its_extent(camera, effects):
 
 
 def test_a_frame_without_the_pad_in_view_is_neither_drawn_nor_searched():
-    renderer = VirtualCamera(camera=RPI_CAMERA_V2_640X480, pad=PAPER_PAD, pad_origin_ned_m=(0.0, 0.0),
-                             rng=np.random.default_rng(2))
-    drawn = []
-    render_shot = renderer.render_shot
-    renderer.render_shot = lambda shot, region=None: drawn.append(region) or render_shot(shot, region)
+    renderer, drawn = _recording_renderer()
     tracker = TrackingMarkerDetector(pad=PAPER_PAD, camera=RPI_CAMERA_V2_640X480)
     away = RenderedFrame(renderer=renderer, shot=renderer.capture(CameraPose(9.0, 0.0, -3.0, 0, 0, 0)),
                          capture_time_s=0.0, index=0)
