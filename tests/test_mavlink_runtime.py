@@ -102,7 +102,9 @@ def test_paper_algorithms_over_mavlink(mode):
     from .conftest import ROOT
 
     mission = load_mission(ROOT / "missions" / "paper_marker_land.yaml")
-    served = ServedSimulator(mission, seed=2, speedup=4.0)
+    # 3x, as the other camera tests: at 4x a loaded machine's companion fell behind the frames (paper_static
+    # landed 24.5 cm off in one CI run, under 20 cm alone).
+    served = ServedSimulator(mission, seed=2, speedup=3.0)
     try:
         outcome = asyncio.run(fly_mavlink(TrialRequest(mission=mission, seed=2, land_mode=mode), url=served.url))
     finally:
