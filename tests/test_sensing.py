@@ -264,3 +264,7 @@ def test_charuco_board_render_is_true_scale_and_detected_whole(tmp_path):
     assert abs(by_id[1][0] - by_id[0][0]) == pytest.approx(square_px, rel=0.01)  # 4 cm at 100 dpi
     result = CliRunner().invoke(app, ["camera", "board", "--out", str(out), "--dictionary", "DICT_9X9"])
     assert result.exit_code == 2 and "--dictionary" in result.stderr
+    # calibrate checks the board as board does, before reading any image.
+    result = CliRunner().invoke(app, ["camera", "calibrate", "--images", str(tmp_path), "--out",
+                                      str(tmp_path / "cal.yaml"), "--marker-m", "0.05"])
+    assert result.exit_code == 2 and "error: --marker-m: must be > 0 and smaller than the square" in result.stderr

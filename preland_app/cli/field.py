@@ -208,22 +208,13 @@ def camera_board(
 ) -> None:
     """Render a printable ChArUco board at true scale for camera calibrate (same options)."""
     from ..sensing.board_render import render_charuco_board
-    from ..sensing.calibration import CharucoBoardSpec
 
     if out.suffix.lower() not in (".png", ".pdf"):
         raise fail(f"--out: {out} must end in .png or .pdf")
     if not 50 <= dpi <= 1200:
         raise fail(f"--dpi: must be within 50..1200, got {dpi}")
-    if not (2 <= squares_x <= 40 and 2 <= squares_y <= 40):
-        raise fail(f"--squares-x/--squares-y: must be within 2..40, got {squares_x} x {squares_y}")
-    if not 0 < marker_m < square_m <= 0.5:
-        raise fail(f"--marker-m/--square-m: need 0 < marker < square <= 0.5 m, got {marker_m:g} and {square_m:g}")
-    from ..sensing.pad import DICTIONARIES
-
-    if dictionary not in DICTIONARIES:
-        raise fail(f"--dictionary: unknown ArUco dictionary {dictionary!r} (e.g. {', '.join(list(DICTIONARIES)[:4])})")
-    spec = CharucoBoardSpec(squares_x=squares_x, squares_y=squares_y, square_m=square_m, marker_m=marker_m,
-                            dictionary=dictionary)
+    spec = _board_spec(squares_x=squares_x, squares_y=squares_y, square_m=square_m, marker_m=marker_m,
+                       dictionary=dictionary)
     path = render_charuco_board(spec, out, dpi=dpi)
     typer.echo(f"wrote {path} ({squares_x} x {squares_y} squares of {square_m * 100:g} cm, markers "
                f"{marker_m * 100:g} cm, {dictionary})")
@@ -241,17 +232,27 @@ def camera_calibrate(
     dictionary: str = typer.Option("DICT_4X4_50", "--dictionary", help="ArUco dictionary of the board."),
 ) -> None:
     """Calibrate a camera from views of a ChArUco board; writes a file the marker sensor reads."""
-    from ..sensing.calibration import CharucoBoardSpec, calibrate, read_images
+    from ..sensing.calibration import calibrate, read_images
 
     if images is None and video is None:
         raise fail("give --images or --video")
+    board_spec = _board_spec(squares_x=squares_x, squares_y=squares_y, square_m=square_m, marker_m=marker_m,
+                             dictionary=dictionary)
     try:
-        result = calibrate(read_images(folder=images, video=video),
-                           board_spec=CharucoBoardSpec(squares_x=squares_x, squares_y=squares_y, square_m=square_m,
-                                                       marker_m=marker_m, dictionary=dictionary))
-    except (PrelandError, KeyError) as error:
+        result = calibrate(read_images(folder=images, video=video), board_spec=board_spec)
+    except PrelandError as error:
         raise fail(str(error)) from None
     result.write(out)
     typer.echo(f"wrote {out}: fx {result.fx_px:.1f} px, fy {result.fy_px:.1f} px, "
                f"{result.views_used} views, RMS reprojection error {result.rms_error_px:.3f} px")
 
+
+def _board_spec(**fields):
+    """The board the options describe; a bad value fails naming its option (`--square-m`...)."""
+    from ..errors import SpecValueError
+    from ..sensing.calibration import CharucoBoardSpec
+
+    try:
+        return CharucoBoardSpec(**fields)
+    except SpecValueError as error:
+        raise fail(f"--{error.field.replace('_', '-')}: {error.problem}") from None

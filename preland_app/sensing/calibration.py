@@ -9,8 +9,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..errors import PrelandError
-from .pad import aruco_dictionary
+from ..errors import PrelandError, require
+from .pad import DICTIONARIES, aruco_dictionary
 
 
 class CalibrationError(PrelandError):
@@ -26,6 +26,15 @@ class CharucoBoardSpec:
     square_m: float = 0.04
     marker_m: float = 0.03
     dictionary: str = "DICT_4X4_50"
+
+    def __post_init__(self) -> None:
+        require(2 <= self.squares_x <= 40, "squares_x", f"must be within 2..40, got {self.squares_x}")
+        require(2 <= self.squares_y <= 40, "squares_y", f"must be within 2..40, got {self.squares_y}")
+        require(0 < self.square_m <= 0.5, "square_m", f"must be > 0 and <= 0.5 m, got {self.square_m:g}")
+        require(0 < self.marker_m < self.square_m, "marker_m",
+                f"must be > 0 and smaller than the square ({self.square_m:g} m), got {self.marker_m:g}")
+        require(self.dictionary in DICTIONARIES, "dictionary",
+                f"unknown ArUco dictionary {self.dictionary!r} (e.g. {', '.join(list(DICTIONARIES)[:4])})")
 
     def board(self) -> cv2.aruco.CharucoBoard:
         return cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square_m, self.marker_m,
