@@ -7,24 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from preland_app.clock import LoopClock, run_virtual, wait_until
+from preland_app.clock import run_virtual
 from preland_app.config.mission import load_mission
-from preland_app.events import EventLog
-from preland_app.landing.base import LandingContext
 from preland_app.landing.paper import Action, PaperLanding, PaperPolicy, PaperSpec
 from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
-from preland_app.sensing.camera import RPI_CAMERA_V2_640X480
-from preland_app.sensing.marker import MarkerDetection, TrackingMarkerDetector
-from preland_app.sensing.pad import PAPER_PAD
-from preland_app.sensing.sources import VirtualFrameSource
-from preland_app.sensing.spec import SensorsSpec
-from preland_app.sensing.suite import SensorSuite
-from preland_app.sensing.virtual_camera import CameraPose, VirtualCamera
-from preland_app.vehicle.fake import FakeVehicle
-from preland_app.vehicle.types import FlightMode
+from preland_app.sensing.marker import MarkerDetection
 
 from .conftest import ROOT
+from .tools.paper_fake import paper_context_over_fake
 
 PAPER_MISSION = ROOT / "missions" / "paper_marker_land.yaml"
 
@@ -143,26 +134,7 @@ def test_the_strategy_lands_a_vehicle_that_exposes_no_truth():
     pad_at = (3.0, 1.0)
 
     async def main():
-        clock = LoopClock()
-        vehicle = FakeVehicle(clock=clock, speed_m_s=2.0, climb_rate_m_s=3.0, descent_rate_m_s=0.5)
-        await vehicle.connect()
-        await vehicle.set_mode(FlightMode.GUIDED)
-        await vehicle.arm()
-        await vehicle.takeoff(altitude_rel_m=12.0)
-
-        async def up():
-            return (await vehicle.telemetry()).altitude_rel_m >= 11.99
-
-        await wait_until(up, clock=clock, timeout_s=30, operation="climb")
-        renderer = VirtualCamera(camera=RPI_CAMERA_V2_640X480, pad=PAPER_PAD, pad_origin_ned_m=pad_at,
-                                 rng=np.random.default_rng(0))
-        source = VirtualFrameSource(
-            renderer=renderer, clock=clock,
-            pose=lambda: CameraPose(vehicle.north_m, vehicle.east_m, vehicle.down_m, 0.0, 0.0, 0.0))
-        sensors = SensorSuite(spec=SensorsSpec(), camera=source,
-                              marker_detector=TrackingMarkerDetector(pad=PAPER_PAD, camera=RPI_CAMERA_V2_640X480))
-        context = LandingContext(vehicle=vehicle, clock=clock, events=EventLog(clock), rng=np.random.default_rng(1),
-                                 timeout_s=300.0, sensors=sensors)
+        vehicle, context = await paper_context_over_fake(pad_at_ned_m=pad_at, timeout_s=300.0)
         report = await PaperLanding(adaptive=True).land(context)
         return vehicle, report
 
