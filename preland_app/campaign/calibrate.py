@@ -36,10 +36,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..config.loader import deep_merge
 from ..config.mission import MissionSpec, load_mission
 from ..errors import PrelandError
 from ..sim.calibratable import CalibratableParameter, find_calibratable, section_and_path
-from ..sim.profile import OptimizerRecord, ProfileSpec, Provenance, ScenarioScore, deep_merge, load_profile, \
+from ..sim.profile import OptimizerRecord, ProfileSpec, Provenance, ScenarioScore, load_profile, \
     overrides_of, resolve_profile_path
 from .executors import ExecutorOptions, TrialExecutor, create_executor
 from .field_data import FieldTrials

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from ..config.loader import build, load_spec_file
+from ..config.loader import build, deep_merge, load_spec_file
 from ..config.mission import FAULTS_SCHEMA, HASH_NEVER, HASH_WHEN_SET, PARAMS_SCHEMA, MissionSpec, load_mission
 from ..errors import SpecError, SpecValueError, require
 from ..sim.spec import EnvironmentSpec
@@ -110,16 +110,6 @@ class ResolvedScenario:
     spec_hash: str
 
 
-def _deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
-    merged = dict(base)
-    for key, value in override.items():
-        if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = _deep_merge(merged[key], value)
-        else:
-            merged[key] = value
-    return merged
-
-
 def _hashed(value: Any, spec_field: dataclasses.Field) -> bool:
     """Whether a field enters a spec's plain form: not `source_path`, and not a field added after 0.1 while
     it keeps its default (HASH_WHEN_SET), so that stores made before it still resume."""
@@ -169,7 +159,7 @@ def resolve_scenarios(campaign: CampaignSpec, *, mission: MissionSpec | None = N
                 field_name = "land_" + field_name
             raise SpecError(path=path, field=f"{where}.{field_name}", problem=error.problem) from None
         if scenario.environment:
-            merged = _deep_merge(_to_plain(flown.environment), scenario.environment)
+            merged = deep_merge(_to_plain(flown.environment), scenario.environment)
             environment = build(EnvironmentSpec, merged, path=path, field=f"{where}.environment")
             flown = replace(flown, environment=environment)
         if scenario.params:

@@ -184,3 +184,14 @@ def load_spec_file(cls: type[T], path: str | Path) -> T:
     if "source_path" in data:
         raise SpecError(path=path_text, field="source_path", problem="unknown key")
     return dataclasses.replace(build(cls, data, path=path_text), source_path=path_text)
+
+
+def deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """`override` merged into `base` (nested mappings merged, anything else replaced)."""
+    merged = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = deep_merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged

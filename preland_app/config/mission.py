@@ -279,7 +279,8 @@ class MissionSpec:
 def load_mission(path: str | Path, *, profile: "ProfileSpec | None" = None) -> MissionSpec:
     """Load and validate a mission YAML file. Raises SpecError naming file and field. `profile` takes the
     place of the profile the mission names (a campaign's, or a candidate during calibration)."""
-    from ..sim.profile import deep_merge, load_profile, resolve_profile_path
+    from ..sim.profile import load_profile, resolve_profile_path
+    from .loader import deep_merge
 
     path_text = str(path)
     data = read_yaml_mapping(path)

@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from ..config.loader import build, load_spec_file
+from ..config.loader import build, deep_merge, load_spec_file
 from ..errors import SpecError, require
 from ..sensing.spec import SensorsSpec
 from .calibratable import CalibratableError, calibratable_parameters, find_calibratable, section_and_path
@@ -115,17 +115,6 @@ class ProfileSpec:
                 return None
             value = value[part]
         return value
-
-
-def deep_merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
-    """`override` merged into `base` (nested mappings merged, anything else replaced)."""
-    merged = dict(base)
-    for key, value in override.items():
-        if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = deep_merge(merged[key], value)
-        else:
-            merged[key] = value
-    return merged
 
 
 def overrides_of(values: dict[str, float]) -> dict[str, dict[str, Any]]:
