@@ -114,7 +114,7 @@ def main() -> None:
             same += 1
             worst_corner_px = max([worst_corner_px] + [float(np.abs(a[k] - b[k]).max()) for k in a])
     print(f"640x480 frames over a 10 m -> 0.3 m descent ({args.frames} frames, CPU time per frame, one core; "
-          f"pad found in {found}; {windowed} found in the tracking window; {culled} with no part of the pad in view, "
+          f"pad found in {found}; {windowed} found in the tracking window; {culled} with no marker wholly in view, "
           f"so neither drawn nor searched)")
     print(f"  {'':38s}{'whole frame':>28s}   {'tracking window':>28s}")
     for label, key in (("render (virtual camera)", "render"), ("detect (with poses)", "detect"),

@@ -157,7 +157,7 @@ def test_the_pad_is_drawn_only_inside_its_extent(camera, effects):
         # The same frame with the pad painted black: the pixels that change are the pad's.
         painted = replace(shot, pad_texture=np.zeros_like(shot.pad_texture))
         changed = np.argwhere(renderer.render_shot(shot) != renderer.render_shot(painted))
-        extent = shot.pad_extent_px
+        extent = renderer.pad_extent_px(shot)
         if extent is None:
             continue
         bounded += 1

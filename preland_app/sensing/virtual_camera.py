@@ -70,20 +70,19 @@ def camera_extrinsics(camera: CameraModel, pose: CameraPose) -> tuple[np.ndarray
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Shot:
     """One frame as captured, before any pixel is drawn: image -> texture homographies (px) of the
-    background and of the pad's pyramid level, the sensor-noise draw (bank index, row, column offset), and
-    `pad_extent_px`: the box (x0, y0, x1, y1; image px, unclipped, so possibly off the image) that holds
-    every pixel the pad (its printed sheet, markers and all) is drawn into, or None when it cannot be
-    bounded (part of the pad behind the camera, or too small to bound through the lens distortion); () when
-    no part of it is in the frame. `markers_extent_px`: the same for the markers a detector can find, those
-    wholly in the frame (OpenCV rejects any candidate that reaches the image's border); through lens
-    distortion, the pad's extent.
+    background and of the pad's pyramid level, the pad frame (north, east, 1; m) -> image homography, the
+    sensor-noise draw (bank index, row, column offset), and `markers_extent_px`: the box (x0, y0, x1, y1;
+    image px, unclipped, so possibly off the image) that holds every pixel of the markers a detector can
+    find, those wholly in the frame (OpenCV rejects any candidate that reaches the image's border); through
+    lens distortion, the whole pad's extent (`VirtualCamera.pad_extent_px`); () when there is none; None when
+    it cannot be bounded.
     """
 
     image_to_background: np.ndarray
     image_to_pad: np.ndarray
-    pad_texture: np.ndarray
+    pad_to_image: np.ndarray
     noise: tuple[int, int, int] | None
-    pad_extent_px: tuple[float, float, float, float] | tuple[()] | None = None
+    pad_texture: np.ndarray
     markers_extent_px: tuple[float, float, float, float] | tuple[()] | None = None
 
 
@@ -218,9 +217,15 @@ class VirtualCamera:
             dy, dx = (int(v) for v in self._rng.integers(0, 32, size=2))
             noise = (index, dy, dx)
         return Shot(image_to_background=image_to_bg, image_to_pad=image_to_pad, pad_texture=texture, noise=noise,
-                    pad_extent_px=(pad_extent := self._pad_extent_px(pad_to_image)),
-                    markers_extent_px=pad_extent if self._map_samples is not None else self._markers_extent_px(
-                        pad_to_image))
+                    pad_to_image=pad_to_image,
+                    markers_extent_px=(self._markers_extent_px(pad_to_image) if self._map_samples is None
+                                       else self._pad_extent_px(pad_to_image)))
+
+    def pad_extent_px(self, shot: Shot) -> tuple[float, float, float, float] | tuple[()] | None:
+        """The box (x0, y0, x1, y1; image px, unclipped) holding every pixel the pad (its printed sheet,
+        markers and all) is drawn into in `shot`; () when no part of it is in the frame; None when it cannot
+        be bounded (part of the pad behind the camera, or too small to bound through the lens distortion)."""
+        return self._pad_extent_px(shot.pad_to_image)
 
     def _markers_extent_px(self, pad_to_image: np.ndarray) -> tuple[float, float, float, float] | tuple[()]:
         """The box (pinhole image px) drawn into by the markers wholly in the frame; () when there are none."""
@@ -244,7 +249,7 @@ class VirtualCamera:
         return box[0] - spread, box[1] - spread, box[2] + spread, box[3] + spread
 
     def _pad_extent_px(self, pad_to_image: np.ndarray) -> tuple[float, float, float, float] | tuple[()] | None:
-        """The image box the pad is drawn into (see `Shot`). Straight edges stay straight in the
+        """The image box the pad is drawn into (see `pad_extent_px`). Straight edges stay straight in the
         ideal image, so the corners bound them there; lens distortion is bounded through its sampled maps,
         one sampling step wider on each side."""
         outline = self._pad_outline
