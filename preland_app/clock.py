@@ -54,15 +54,32 @@ class LoopClock:
     async def sleep(self, duration_s: float) -> None:
         await asyncio.sleep(max(0.0, duration_s))
 
+    def skip_alone(self, duration_s: float) -> bool:
+        """Advance time by `duration_s` at once, without yielding, when nothing else would run before then
+        (see `VirtualTimeEventLoop.skip_alone`); False, with time unchanged, on any other loop or when
+        something would. A task that sleeps in fixed steps runs the same with or without it."""
+        skip = getattr(self._loop, "skip_alone", None)
+        return skip is not None and skip(duration_s)
+
 
 class _VirtualSelector(selectors.DefaultSelector):
     """A selector whose blocking waits advance virtual time instead of blocking."""
 
+    # With callbacks ready (timeout 0), I/O is polled only every this many passes: the poll is a system
+    # call, and in virtual time nothing is late for waiting a few callbacks.
+    _POLL_EVERY_READY_PASSES = 32
+
     def __init__(self) -> None:
         super().__init__()
         self.virtual_now_s = 0.0
+        self._ready_passes = 0
 
     def select(self, timeout: float | None = None):  # noqa: D401 - selector API
+        if timeout is not None and timeout <= 0:
+            self._ready_passes += 1
+            if self._ready_passes < self._POLL_EVERY_READY_PASSES:
+                return []
+        self._ready_passes = 0
         # Real I/O (the loop's self-pipe, threads posting callbacks) is still
         # polled, without waiting; only the idle wait becomes a jump in time.
         events = super().select(0)
@@ -90,6 +107,28 @@ class VirtualTimeEventLoop(asyncio.SelectorEventLoop):
 
     def time(self) -> float:
         return self._virtual_selector.virtual_now_s
+
+    def skip_alone(self, delay_s: float) -> bool:
+        """Advance virtual time by `delay_s` now, for the running callback, when the loop would otherwise
+        do exactly that and then resume only it: no other callback ready, no other timer due by then
+        (asyncio's own rule: due when earlier than the new time plus the clock's resolution). The time
+        reached is computed as `asyncio.sleep(delay_s)` would reach it, to the last bit, so a task that
+        steps with this instead of sleeping runs identically, minus the loop's bookkeeping. False, with
+        time unchanged, otherwise."""
+        if self._ready or self._stopping or delay_s <= 0:
+            return False
+        selector = self._virtual_selector
+        now_s = selector.virtual_now_s
+        # call_later(delay) schedules at now + delay; _run_once then waits (when - now); select adds it.
+        timeout_s = (now_s + delay_s) - now_s
+        new_now_s = now_s + timeout_s if timeout_s > 0 else now_s
+        scheduled = self._scheduled
+        if scheduled:
+            head = scheduled[0]
+            if head._cancelled or head._when < new_now_s + self._clock_resolution:
+                return False
+        selector.virtual_now_s = new_now_s
+        return True
 
 
 def run_virtual(main: Coroutine[Any, Any, T]) -> T:

@@ -1,7 +1,8 @@
 """The virtual camera: renders the ground (a textured field with the pad on it) from the true pose.
 
 Rendering is a plane-to-image homography (OpenCV warpPerspective) per layer:
-a coarse background texture covering the whole field and a pyramid of pad
+a grass texture covering the whole field (drawn in tiles as frames first
+read them: `ground_texture`) and a pyramid of pad
 textures from which the level closest to the image's ground resolution is
 used (so the pad stays sharp up close and is not aliased from high up). Lens
 distortion, sensor noise, blur and exposure changes are applied on top. The
@@ -10,6 +11,7 @@ pose comes from ground truth; what leaves this module is only an image.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -17,10 +19,9 @@ import cv2
 import numpy as np
 
 from .camera import R_CAM_FROM_BODY, CameraModel
+from .ground_texture import FIELD_EXTENT_M, FIELD_PX_PER_M, GrassTexture
 from .pad import PadSpec, render_pad_texture
 
-_BACKGROUND_EXTENT_M = 80.0
-_BACKGROUND_PX_PER_M = 24.0
 _PAD_MAX_PX_PER_M = 1600.0
 _MIN_LENS_HEIGHT_M = 0.08
 _MAP_STEP_PX = 8
@@ -107,7 +108,7 @@ class VirtualCamera:
         self._rng = rng
         self._k = camera.camera_matrix
         self._size = (camera.width_px, camera.height_px)
-        self._background = self._make_background(rng)
+        self._ground = GrassTexture(rng=rng)
         self._pad_levels = self._make_pad_pyramid(pad)
         self._undistort_maps = self._make_distortion_maps() if camera.has_distortion else None
         self._pad_outline = _pad_outline_m(pad)
@@ -127,44 +128,30 @@ class VirtualCamera:
         h, w = camera.height_px + 32, camera.width_px + 32
         # OpenCV's Gaussian kernel for 8-bit images reaches round(3 sigma) px; one more for rounding.
         self._blur_radius_px = math.ceil(3.0 * effects.blur_px) + 1 if effects.blur_px > 0 else 0
-        self._noise_bank = [
-            np.round(rng.standard_normal((h, w), dtype=np.float32) * effects.noise_sigma).astype(np.int16)
-            for _ in range(4)
-        ] if effects.noise_sigma > 0 else []
+        if effects.noise_sigma > 0:
+            levels = _rounded_normal_levels(effects.noise_sigma)
+            self._noise_bank = [levels[rng.integers(0, len(levels), size=(h, w), dtype=np.uint16)] for _ in range(4)]
+        else:
+            self._noise_bank = []
 
     # ---------------------------------------------------------------- textures
 
     @staticmethod
-    def _make_background(rng: np.random.Generator) -> np.ndarray:
-        """Grass-like texture: smoothed noise at a few scales, mid grey, low contrast."""
-        size = int(_BACKGROUND_EXTENT_M * _BACKGROUND_PX_PER_M)
-        texture = None
-        for cells, weight in ((size // 64, 30.0), (size // 8, 18.0), (size, 10.0)):
-            layer = rng.standard_normal((cells, cells)).astype(np.float32)
-            if cells != size:
-                layer = cv2.resize(layer, (size, size), interpolation=cv2.INTER_CUBIC)
-            # In place, in single precision: the same sums as a float32 accumulation, without temporaries.
-            np.multiply(layer, np.float32(weight), out=layer)
-            if texture is None:
-                texture = layer
-            else:
-                texture += layer
-        texture += np.float32(110.0)
-        np.clip(texture, 40, 190, out=texture)
-        return texture.astype(np.uint8)
-
-    @staticmethod
-    def _make_pad_pyramid(pad: PadSpec) -> list[tuple[float, np.ndarray]]:
+    @functools.lru_cache(maxsize=8)
+    def _make_pad_pyramid(pad: PadSpec) -> tuple[tuple[float, np.ndarray], ...]:
+        """The pad's textures from `_PAD_MAX_PX_PER_M` down, halving; shared (read-only) by every camera
+        that sees the same pad, since a trial's camera would otherwise redraw it."""
         levels = []
         ppm = _PAD_MAX_PX_PER_M
         texture = render_pad_texture(pad, pixels_per_m=ppm)
         while True:
+            texture.flags.writeable = False
             levels.append((ppm, texture))
             if texture.shape[0] < 32:
                 break
             texture = cv2.pyrDown(texture)
             ppm /= 2.0
-        return levels
+        return tuple(levels)
 
     def _make_distortion_maps(self) -> tuple[np.ndarray, np.ndarray]:
         """For each distorted output pixel, where it falls in the ideal pinhole image."""
@@ -189,8 +176,8 @@ class VirtualCamera:
         asked for): the layers' homographies, the pad's pyramid level and this frame's sensor-noise draw."""
         ground_to_image = self._ground_homography(pose)
         # Background: texture pixel (col, row) -> ground (north, east), field centred on the origin.
-        half = _BACKGROUND_EXTENT_M / 2.0
-        ppm = _BACKGROUND_PX_PER_M
+        half = FIELD_EXTENT_M / 2.0
+        ppm = FIELD_PX_PER_M
         bg_to_ground = np.array([[0.0, -1.0 / ppm, half], [1.0 / ppm, 0.0, -half], [0.0, 0.0, 1.0]])
         image_to_bg = np.linalg.inv(ground_to_image @ bg_to_ground)
         # Pad: the coarsest pyramid level that still has twice the image's ground resolution
@@ -323,7 +310,9 @@ class VirtualCamera:
             shift = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
             image_to_bg, image_to_pad = image_to_bg @ shift, image_to_pad @ shift
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-        frame = cv2.warpPerspective(self._background, image_to_bg, size, flags=flags, borderMode=cv2.BORDER_REFLECT)
+        self._ground.ensure_read_by(image_to_bg, size)
+        frame = cv2.warpPerspective(self._ground.pixels, image_to_bg, size, flags=flags,
+                                    borderMode=cv2.BORDER_REFLECT)
         # BORDER_TRANSPARENT leaves the background wherever the pad texture does not reach.
         cv2.warpPerspective(shot.pad_texture, image_to_pad, size, dst=frame, flags=flags,
                             borderMode=cv2.BORDER_TRANSPARENT)
@@ -384,6 +373,22 @@ class RenderedFrame:
         if self._image is not None:
             return np.ascontiguousarray(self._image[y0:y1, x0:x1])
         return self._renderer.render_shot(self._shot, (x0, y0, x1, y1))
+
+
+@functools.lru_cache(maxsize=4)
+def _rounded_normal_levels(sigma: float) -> np.ndarray:
+    """A table of 65536 int16 values whose uniform draw is round(N(0, sigma^2)) to within 1/65536 in each
+    level's probability (tails beyond that truncated): sensor noise in whole grey levels, from 2 bytes of
+    random stream a pixel instead of a Gaussian draw."""
+    count = 65536
+    reach = int(math.ceil(8.0 * sigma)) + 1
+    levels = np.arange(-reach, reach + 1)
+    upper = np.array([0.5 * (1.0 + math.erf((k + 0.5) / (sigma * math.sqrt(2.0)))) for k in levels])
+    # Slot i (of `count`) takes the level whose cumulative probability first exceeds the slot's centre.
+    index = np.searchsorted(upper * count, np.arange(count) + 0.5, side="right")
+    table = levels[np.minimum(index, len(levels) - 1)].astype(np.int16)
+    table.flags.writeable = False
+    return table
 
 
 def _pad_outline_m(pad: PadSpec) -> np.ndarray:
