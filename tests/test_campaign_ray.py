@@ -27,7 +27,9 @@ from preland_app.runtime.sitl import SITL_ENV, SitlOptions
 from .conftest import ROOT
 from .test_campaign import QUICK, comparable, write_campaign
 
-# One module-wide local Ray instance: the module runs on one xdist worker.
+# One local Ray instance for the whole session: the module runs on one xdist worker (its group), and a
+# session-wide instance is not stopped and restarted each time that worker's queue interleaves other modules'
+# tests with these (a start costs about 15 s).
 pytestmark = [pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find Ray's processes"),
               pytest.mark.xdist_group("ray")]
 
@@ -79,10 +81,10 @@ def _wait_gone(pids: set[int], timeout_s: float = 20.0) -> list[str]:
     return [_cmdline(pid)[:80] for pid in pids if _alive(pid)]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def cluster():
     """A local Ray instance with 2 CPUs and one `sitl` slot, whose nodes' $PRELAND_SITL_BINARY is NODE_SITL;
-    stopped at the end of the module, leaving no Ray process behind."""
+    stopped at the end of the session, leaving no Ray process behind."""
     previous = os.environ.get(SITL_ENV)
     os.environ[SITL_ENV] = NODE_SITL  # what Ray's processes inherit: the node's environment
     try:

@@ -70,9 +70,17 @@ def test_angle_signs_follow_landing_target_convention(paper_camera, paper_detect
     assert ax > math.radians(5) and abs(ay) < math.radians(0.5)
 
 
-def test_marker_distance_matches_height(paper_camera, paper_detector):
-    detection = choose_smallest(paper_detector.detect(paper_camera.render(_pose(height_m=4.0))))
-    assert detection.distance_m == pytest.approx(4.0, rel=0.03)
+def test_marker_distance_matches_height(paper_detector):
+    # Its own camera: the module's shared one has drawn a different number of noise fields depending on which
+    # of this module's tests ran before on the same xdist worker. From 4 m the 0.18 m marker is 24 px wide and
+    # its distance comes out 2.6 to 3.2 % long whatever the noise draw (measured over 300 draws, 3 seeds):
+    # a single frame's pose from a marker that small, so the bound allows 3.5 % above and 3 % below.
+    camera = VirtualCamera(camera=RPI_CAMERA_V2_640X480, pad=PAPER_PAD, pad_origin_ned_m=PAD_AT,
+                           rng=np.random.default_rng(5))
+    distances = [choose_smallest(paper_detector.detect(camera.render(_pose(height_m=4.0)))).distance_m
+                 for _ in range(10)]
+    assert all(0.97 * 4.0 < d < 1.035 * 4.0 for d in distances), distances
+    assert np.median(distances) == pytest.approx(4.0, rel=0.03)
 
 
 def test_thesis_pad_has_a_marker_in_view_from_ten_metres_to_the_ground():
