@@ -285,3 +285,42 @@ def test_the_report_compares_with_a_published_range_and_says_when_defaults_were_
     assert "model's defaults" in section and row[1] == "defaults" and row[4] == "51.0..144.0"
     assert row[5] == ("inside" if 51 <= mean <= 144 else "below" if mean < 51 else "above")
     assert row[6] == "-"  # no published trials: no distance
+
+
+def test_the_fit_note_tells_a_run_inside_from_a_fit_that_could_not_reach_it(tmp_path):
+    """Where the profile's own scoring trials were outside the published range, the note says whether this
+    run's mean is inside anyway or still outside; where they were inside, there is no note."""
+    from types import SimpleNamespace
+
+    from preland_app.campaign.fidelity import fidelity_rows
+
+    def score(label, *, inside, sim_mean_cm):
+        return {"label": label, "role": "fitted", "wasserstein_cm": 5.0, "sim_mean_cm": sim_mean_cm,
+                "field_mean_cm": 25.0, "field_min_cm": 20.0, "field_max_cm": 30.0, "inside": inside,
+                "trials": 3, "field_trials": 3}
+
+    profile = {"name": "fit", "environment": {"navigation": {"gps_drift_sigma_m": 1.5}},
+               "provenance": {"data": "field.csv", "campaign": "c.yaml",
+                              "fitted": {"navigation.gps_drift_sigma_m": 1.5}, "held_out": [],
+                              "scores": [score("now inside", inside=False, sim_mean_cm=12.0),
+                                         score("still below", inside=False, sim_mean_cm=11.0),
+                                         score("was inside", inside=True, sim_mean_cm=24.0)]}}
+    write(tmp_path, "fit.yaml", yaml.safe_dump(profile))
+
+    def summary(label, errors_cm):
+        return SimpleNamespace(
+            scenario=label, source="sim", reference=SimpleNamespace(min_error_cm=None),
+            published=[SimpleNamespace(error_cm=e) for e in (20.0, 25.0, 30.0)], errors_cm=lambda: errors_cm,
+            published_max_error_cm=lambda: 30.0, published_avg_error_cm=lambda: 25.0,
+            avg_landing_time_s=lambda: 20.0, published_avg_landing_time_s=lambda: 22.0)
+
+    rows = {row[0]: row for row in fidelity_rows(
+        [summary("now inside", [22.0, 24.0, 26.0]), summary("still below", [10.0, 12.0, 14.0]),
+         summary("was inside", [40.0, 44.0, 48.0])], load_profile(tmp_path / "fit.yaml"))}
+    assert rows["now inside"][5] == "inside"
+    assert rows["now inside"][9] == "inside in this run, not in the fit's own scoring trials (12.0 cm against 20.0..30.0)"
+    assert rows["still below"][5] == "below"
+    assert rows["still below"][9] == "the fit could not bring it inside (profile: 11.0 cm against 20.0..30.0)"
+    # The fit's own trials were inside: no note, even though this run's mean is above.
+    assert rows["was inside"][5] == "above" and rows["was inside"][9] == ""
+    assert rows["now inside"][6] == f"{wasserstein_distance([22.0, 24.0, 26.0], [20.0, 25.0, 30.0]):.1f}"
