@@ -156,7 +156,9 @@ def test_fault_commands_reach_the_flying_companion(thesis_mission):
                                                   url=served.url, fault_listen=f"udp://127.0.0.1:{fault_port}"))
         while served.simulator.autopilot.mode.name != "LAND":
             await asyncio.sleep(0.05)
-        await asyncio.sleep(1.0)
+        # Soon after the landing starts: the command's own round trip takes a wall second or two (3x that of
+        # the descent), and a later start left as few as 19 frames to drop before touchdown.
+        await asyncio.sleep(0.3)
         # In a thread: the sender waits for the acknowledgement that this loop's listener sends.
         result = await asyncio.to_thread(CliRunner().invoke, app, ["fault", "send", "--connect",
                                                                    f"udp://127.0.0.1:{fault_port}", "--target",
