@@ -17,12 +17,6 @@ from .test_mavlink_face import free_port
 SPEEDUP = 8.0
 
 
-# The tests that render and detect in real time (wall-clock bound at 3x, about a third of a core each, but
-# needed on time) run in two xdist groups: at most two of them at once, beside two other workers.
-CAMERA_A = pytest.mark.xdist_group("camera_in_real_time_a")
-CAMERA_B = pytest.mark.xdist_group("camera_in_real_time_b")
-
-
 class ServedSimulator:
     """A MavlinkFace in a background thread with its own event loop."""
 
@@ -80,9 +74,9 @@ def test_thesis_mission_over_mavlink(thesis_mission, mode):
     assert 15.0 < outcome.landing_time_s < 40.0
 
 
+@pytest.mark.xdist_group("camera_in_real_time")
 @pytest.mark.parametrize("mode, faults", [
-    pytest.param("marker", None, marks=CAMERA_A), pytest.param("fused", None, marks=CAMERA_A),
-    pytest.param("cautious", {"marker": "below:3:first-attempt"}, marks=CAMERA_B),
+    ("marker", None), ("fused", None), ("cautious", {"marker": "below:3:first-attempt"}),
 ])
 def test_camera_land_modes_over_mavlink(thesis_mission, mode, faults):
     # The camera renders and detects in real time here, so the vehicle runs slower: at 6x a loaded CI
@@ -100,8 +94,8 @@ def test_camera_land_modes_over_mavlink(thesis_mission, mode, faults):
         assert outcome.details["attempts"] == 2 and outcome.details["marker_dropped"] > 0
 
 
-@pytest.mark.parametrize("mode", [pytest.param("paper_adaptive", marks=CAMERA_B),
-                                  pytest.param("paper_static", marks=CAMERA_A)])
+@pytest.mark.parametrize("mode", ["paper_adaptive", "paper_static"])
+@pytest.mark.xdist_group("camera_in_real_time")
 def test_paper_algorithms_over_mavlink(mode):
     from preland_app.config.mission import load_mission
 
@@ -141,7 +135,7 @@ def test_lost_heartbeat_ends_the_trial_as_link_lost(thesis_mission):
     assert ended_at - silenced_at >= 3.5
 
 
-@CAMERA_B
+@pytest.mark.xdist_group("camera_in_real_time")
 def test_fault_commands_reach_the_flying_companion(thesis_mission):
     """PRELAND_FAULT_INJECTION sent with `preland fault send` changes the marker's faults mid-landing."""
     from typer.testing import CliRunner

@@ -302,7 +302,7 @@ def test_modes_lists_installed_plugins_in_aligned_columns(proportional_installed
     assert "preland-broken 1.0" in rows["broken"] and "cannot be loaded: cannot import 'preland_gone'" in rows["broken"]
 
 
-@pytest.mark.xdist_group("camera_in_real_time_b")  # see CAMERA_B in test_mavlink_runtime.py
+@pytest.mark.xdist_group("camera_in_real_time")
 def test_the_example_plugin_lands_through_the_mavlink_face(proportional_installed, thesis_mission):
     from preland_app.runtime.mavlink import fly_mavlink
 
