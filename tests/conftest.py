@@ -1,19 +1,11 @@
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-# The suite runs 4 xdist workers on 2 cores: OpenCV's own thread pool in each (and in the processes the tests
-# start) would only add waiting threads on top, as in a campaign's workers, which run OpenCV on one thread.
-os.environ.setdefault("OPENCV_FOR_THREADS_NUM", "1")
+import pytest
 
-import cv2  # noqa: E402
-import pytest  # noqa: E402
-
-cv2.setNumThreads(1)
-
-from preland_app.config.mission import MissionSpec, load_mission  # noqa: E402
-from preland_app.runtime.embedded import TrialRequest, run_trial  # noqa: E402
+from preland_app.config.mission import MissionSpec, load_mission
+from preland_app.runtime.embedded import TrialRequest, run_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 THESIS_MISSION = ROOT / "missions" / "thesis_square_land.yaml"

@@ -159,16 +159,21 @@ def test_fault_commands_reach_the_flying_companion(thesis_mission):
                                                                    "marker", "--r-drop", "1.0"])
         assert result.exit_code == 0, result.output
         assert "the companion applied it" in result.stdout
-        return await asyncio.wait_for(trial, timeout=120)
+        targets_when_applied = served.face.landing_targets
+        return await asyncio.wait_for(trial, timeout=120), targets_when_applied
 
     try:
-        outcome = asyncio.run(main())
+        outcome, targets_when_applied = asyncio.run(main())
     finally:
         served.stop()
     assert outcome.outcome is Outcome.LANDED
     event = next(e for e in outcome.events if e.kind == "fault_command")
     assert event.data["target"] == 2 and event.data["r_drop"] == 1.0
-    assert outcome.details["marker_fault"] == "permanent" and outcome.details["marker_dropped"] > 20
+    # From the acknowledgement on, every marker reading is dropped: none reaches the autopilot (one may have
+    # been on the wire). How many there were depends on how far the descent had gone when the command
+    # arrived, a wall-clock race at 3x (from 11 on a loaded CI machine to about 100).
+    assert outcome.details["marker_fault"] == "permanent" and outcome.details["marker_dropped"] > 0
+    assert targets_when_applied > 0 and served.face.landing_targets - targets_when_applied <= 1
 
 
 def test_parameters_are_read_and_written_with_ardupilots_types(thesis_mission):
