@@ -47,6 +47,8 @@ class LoopClock:
     def __init__(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._epoch = self._loop.time()
+        # Looked up once: the simulator asks at nearly every physics step.
+        self._skip_alone = getattr(self._loop, "skip_alone", None)
 
     def now_s(self) -> float:
         return self._loop.time() - self._epoch
@@ -58,8 +60,7 @@ class LoopClock:
         """Advance time by `duration_s` at once, without yielding, when nothing else would run before then
         (see `VirtualTimeEventLoop.skip_alone`); False, with time unchanged, on any other loop or when
         something would. A task that sleeps in fixed steps runs the same with or without it."""
-        skip = getattr(self._loop, "skip_alone", None)
-        return skip is not None and skip(duration_s)
+        return self._skip_alone is not None and self._skip_alone(duration_s)
 
 
 class _VirtualSelector(selectors.DefaultSelector):

@@ -88,15 +88,14 @@ class GrassTexture:
 
     def _draw_tile(self, row: int, col: int) -> None:
         y0, x0 = row * TILE_PX, col * TILE_PX
-        y1, x1 = y0 + TILE_PX, x0 + TILE_PX
         # Fine grain: each tile from its own stream, keyed by the field's seed and the tile's place.
         rng = np.random.default_rng([self._tile_seed, row, col])
-        tile = rng.standard_normal((y1 - y0, x1 - x0), dtype=np.float32)
+        tile = rng.standard_normal((TILE_PX, TILE_PX), dtype=np.float32)
         np.multiply(tile, np.float32(_FINE_WEIGHT), out=tile)
         for factor, block, cells, spread in self._coarse:
             r0, c0 = y0 // factor, x0 // factor
             tile += spread @ cells[r0:r0 + block, c0:c0 + block] @ spread.T
         tile += np.float32(_MEAN_GREY)
         np.clip(tile, *_GREY_RANGE, out=tile)
-        self.pixels[y0:y1, x0:x1] = tile.astype(np.uint8)
+        self.pixels[y0:y0 + TILE_PX, x0:x0 + TILE_PX] = tile.astype(np.uint8)
         self._drawn[row, col] = True
