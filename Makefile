@@ -28,6 +28,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/sim_speed.py
 	$(VENV)/bin/python benchmarks/vision_speed.py
 	$(VENV)/bin/python benchmarks/loop_speed.py
+	$(VENV)/bin/python benchmarks/face_speed.py
 	$(VENV)/bin/python benchmarks/campaign_wall_time.py
 	$(VENV)/bin/python benchmarks/executor_overhead.py
 	$(VENV)/bin/python benchmarks/store_growth.py

@@ -205,3 +205,36 @@ def test_the_same_address_twice_is_refused():
     with pytest.raises(MavlinkFaceError, match="the same address twice"):
         MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=1.0),
                     listen=[f"udp:127.0.0.1:{port}", f"udp:127.0.0.1:{port}"])
+
+
+class OvershootingClock:
+    """A clock whose every sleep overshoots by half again, as short asyncio sleeps do; vehicle s."""
+
+    def __init__(self) -> None:
+        self.time_s = 0.0
+
+    def now_s(self) -> float:
+        return self.time_s
+
+    async def sleep(self, duration_s: float) -> None:
+        self.time_s += 1.5 * max(0.0, duration_s)
+        await asyncio.sleep(0)
+
+
+def test_the_face_keeps_to_its_clock_when_sleeps_overshoot():
+    clock = OvershootingClock()
+    face = MavlinkFace(simulator=Simulator(seed=1), clock=clock, listen=f"udp:127.0.0.1:{free_port()}")
+
+    async def serve_until(vehicle_s: float) -> None:
+        task = asyncio.ensure_future(face.run())
+        deadline = time.monotonic() + 20.0
+        while face.simulator.time_s < vehicle_s and time.monotonic() < deadline:
+            await asyncio.sleep(0.001)
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+    asyncio.run(serve_until(5.0))
+    # Sleeping a step after every step ran 1.5x slower than the clock; steps due at fixed times keep up.
+    assert face.simulator.time_s >= 5.0
+    assert abs(face.simulator.time_s - clock.now_s()) <= 2 * face.simulator.dt_s

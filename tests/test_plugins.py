@@ -306,9 +306,9 @@ def test_modes_lists_installed_plugins_in_aligned_columns(proportional_installed
 def test_the_example_plugin_lands_through_the_mavlink_face(proportional_installed, thesis_mission):
     from preland_app.runtime.mavlink import fly_mavlink
 
-    from .test_mavlink_runtime import ServedSimulator
+    from .test_mavlink_runtime import CAMERA_SPEEDUP, ServedSimulator
 
-    served = ServedSimulator(thesis_mission, seed=1, speedup=3.0)  # the camera in real time
+    served = ServedSimulator(thesis_mission, seed=1, speedup=CAMERA_SPEEDUP)  # the camera in real time
     try:
         outcome = asyncio.run(fly_mavlink(TrialRequest(mission=thesis_mission, seed=1, land_mode="proportional"),
                                           url=served.url))
