@@ -20,8 +20,9 @@ from .conftest import ROOT, THESIS_MISSION
 from .tools.terminal import as_from_a_terminal
 
 
-# The stand-in SITL's speed-up where a test is not about speed: 10x is what a loaded 2-core machine keeps.
-STAND_IN_SPEEDUP = 10.0
+# The stand-in SITL's speed-up where a test is not about speed: 8x, what its 20x and 40x reached before the
+# face kept to its clock (at 10x, one CI run ended a trial as a pilot takeover under load).
+STAND_IN_SPEEDUP = 8.0
 
 
 @pytest.fixture()
