@@ -16,7 +16,9 @@ from preland_app.sim.params import ARDUPILOT_PARAM_NAMES
 from preland_app.sim.simulator import Simulator
 from preland_app.sim.spec import EnvironmentSpec, WindSpec
 
-SPEEDUP = 10.0
+# 8x: what these tests reached when they asked 10x, before the face kept to its clock; a true 10x
+# beside the real-time field flight left its camera behind its frame rate.
+SPEEDUP = 8.0
 
 
 def free_port() -> int:

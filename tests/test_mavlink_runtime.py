@@ -182,7 +182,7 @@ def test_parameters_are_read_and_written_with_ardupilots_types(thesis_mission):
     from preland_app.errors import CommandDenied
     from preland_app.vehicle.mavlink_backend import MavlinkVehicle
 
-    served = ServedSimulator(thesis_mission, seed=1, speedup=10.0)
+    served = ServedSimulator(thesis_mission, seed=1, speedup=SPEEDUP)
 
     async def main():
         vehicle = MavlinkVehicle(url=served.url)
