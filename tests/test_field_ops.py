@@ -1,6 +1,7 @@
 """Field operations: preflight checks, pilot takeover and the geofence."""
 
 import asyncio
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -194,3 +195,79 @@ def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(the
         (trial,) = store.trials("field_day")
         assert trial["source"] == "field" and trial["landing_error_cm"] == 7.5 and trial["offset_east_cm"] == -5.5
         assert trial["land_mode"] == "marker"
+
+
+class _OneMessage:
+    """MAVSDK's MavlinkDirect stream, delivering one message and ending."""
+
+    def __init__(self, name: str, fields: dict) -> None:
+        from types import SimpleNamespace
+
+        self.message = SimpleNamespace(message_name=name, fields_json=json.dumps(fields), system_id=1,
+                                       component_id=1)
+
+    async def subscribe_message(self, name: str):
+        yield self.message
+
+
+class _SteppedClock:
+    """Vehicle time that moves only when the test moves it."""
+
+    def __init__(self) -> None:
+        self.time_s = 100.0
+
+    def now_s(self) -> float:
+        return self.time_s
+
+    def observe(self, vehicle_s: float) -> None:
+        pass
+
+
+def test_a_heartbeat_sent_before_a_mode_change_but_read_after_its_ack_is_no_takeover(monkeypatch):
+    """MAVSDK delivers HEARTBEAT and COMMAND_ACK on separate streams, so HEARTBEATs sent before an accepted
+    change can arrive after its ACK (seen at 20x as a false "pilot takeover: mode STABILIZE"). They do not
+    count; a mode the vehicle really keeps, or a change after the confirmation, does."""
+    from preland_app.field.takeover import GuardedVehicle, PilotTakeover
+    from preland_app.vehicle.mavlink_backend import COMMANDED_STATE_GRACE_S, MavlinkVehicle
+
+    vehicle = MavlinkVehicle(url="udp://:14550")
+    clock = _SteppedClock()
+    vehicle._clock = clock
+
+    async def accepted(*params, operation, check=True):
+        return None
+
+    monkeypatch.setattr(vehicle, "_command", accepted)
+    monkeypatch.setattr(vehicle, "_check_link", lambda operation: None)
+
+    def heartbeat(mode: FlightMode, armed: bool, after_s: float = 0.1):
+        """One HEARTBEAT through the backend's own receive path, `after_s` vehicle seconds on."""
+        clock.time_s += after_s
+        vehicle._direct = _OneMessage("HEARTBEAT", {"custom_mode": mode.value, "base_mode": 128 if armed else 0})
+        asyncio.run(vehicle._listen())
+        telemetry = asyncio.run(vehicle.telemetry())
+        guarded.check(telemetry)
+        return telemetry
+
+    guarded = GuardedVehicle(vehicle)
+    heartbeat(FlightMode.STABILIZE, False)
+    asyncio.run(guarded.set_mode(FlightMode.GUIDED))
+    asyncio.run(guarded.arm())
+    stale = [heartbeat(FlightMode.STABILIZE, False) for _ in range(10)]  # a vehicle second of late ones
+    assert {(t.mode, t.armed) for t in stale} == {(FlightMode.GUIDED, True)}
+    confirmed = heartbeat(FlightMode.GUIDED, True)
+    assert (confirmed.mode, confirmed.armed) == (FlightMode.GUIDED, True)
+    # After the confirmation, another mode is the pilot's at once: PilotTakeover after GuardedVehicle.CONFIRM_S.
+    assert heartbeat(FlightMode.LOITER, True).mode is FlightMode.LOITER
+    with pytest.raises(PilotTakeover, match="mode LOITER, preland had set GUIDED"):
+        heartbeat(FlightMode.LOITER, True, after_s=GuardedVehicle.CONFIRM_S)
+
+    # A change the vehicle never shows is believed for COMMANDED_STATE_GRACE_S only.
+    vehicle._commanded_mode = vehicle._commanded_armed = None
+    guarded = GuardedVehicle(vehicle)
+    heartbeat(FlightMode.STABILIZE, False)
+    asyncio.run(guarded.set_mode(FlightMode.GUIDED))
+    assert heartbeat(FlightMode.STABILIZE, False, after_s=COMMANDED_STATE_GRACE_S - 0.2).mode is FlightMode.GUIDED
+    assert heartbeat(FlightMode.STABILIZE, False, after_s=0.2).mode is FlightMode.STABILIZE
+    with pytest.raises(PilotTakeover, match="mode STABILIZE, preland had set GUIDED"):
+        heartbeat(FlightMode.STABILIZE, False, after_s=GuardedVehicle.CONFIRM_S)

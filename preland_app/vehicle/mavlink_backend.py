@@ -26,6 +26,7 @@ import json
 import math
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
@@ -58,6 +59,11 @@ _LANDED = {0: LandedState.UNDEFINED, 1: LandedState.ON_GROUND, 2: LandedState.IN
            4: LandedState.LANDING}
 STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 10, "ATTITUDE": 10, "EXTENDED_SYS_STATE": 5,
               "SYS_STATUS": 2, "GPS_RAW_INT": 2, "HOME_POSITION": 1, "DISTANCE_SENSOR": 10}
+# HEARTBEAT arrives on MAVSDK's message stream, COMMAND_ACK on the command call's own: a HEARTBEAT sent
+# before an accepted mode change or arm/disarm can reach preland after that command's ACK. The commanded
+# state stands until a HEARTBEAT reports it, or for this many vehicle seconds after the ACK (heartbeats come
+# at 1 to 10 Hz, so any later one was sent after the change and is believed).
+COMMANDED_STATE_GRACE_S = 2.0
 PARAM_TRIES = 3
 PARAM_TIMEOUT_S = 1.5  # wall seconds per try
 FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
@@ -145,10 +151,38 @@ class DaemonCallExecutor(concurrent.futures.ThreadPoolExecutor):
         """Nothing to join: a call still blocked stays behind on its daemon thread."""
 
 
+def _heartbeat_mode(fields: dict[str, Any]) -> FlightMode:
+    try:
+        return FlightMode(int(fields.get("custom_mode", 0)))
+    except ValueError:
+        return FlightMode.STABILIZE
+
+
+def _heartbeat_armed(fields: dict[str, Any]) -> bool:
+    return bool(int(fields.get("base_mode", 0)) & 128)  # MAV_MODE_FLAG_SAFETY_ARMED
+
+
 def mavsdk_connection_url(url: str) -> str:
     """`url` as MAVSDK takes it: `tcp://host:port` (a vehicle or SITL serving TCP, as ArduPilot's
     documentation writes it) is MAVSDK's `tcpout://host:port`; MAVSDK 3 deprecates the bare `tcp://`."""
     return "tcpout://" + url[len("tcp://"):] if url.startswith("tcp://") else url
+
+
+@dataclass(slots=True)
+class _Commanded:
+    """An accepted arm/disarm or mode change, until a HEARTBEAT confirms it."""
+
+    value: Any
+    acked_at_s: float  # vehicle time of the COMMAND_ACK
+    confirmed: bool = False
+
+    def reported(self, heartbeat_value: Any, now_s: float) -> Any:
+        """What the vehicle is taken to be in, given the newest HEARTBEAT's `heartbeat_value`."""
+        if heartbeat_value == self.value:
+            self.confirmed = True
+        if self.confirmed or now_s - self.acked_at_s >= COMMANDED_STATE_GRACE_S:
+            return heartbeat_value
+        return self.value
 
 
 class MavlinkVehicle:
@@ -175,9 +209,9 @@ class MavlinkVehicle:
         self._closed = False
         self._connected = False
         self.system_id = 1
-        # HEARTBEAT comes at 1 Hz: an accepted arm/disarm or mode change holds until the next one confirms it.
-        self._commanded_armed: tuple[bool, float] | None = None
-        self._commanded_mode: tuple[FlightMode, float] | None = None
+        # An accepted arm/disarm or mode change holds until a HEARTBEAT confirms it (COMMANDED_STATE_GRACE_S).
+        self._commanded_armed: _Commanded | None = None
+        self._commanded_mode: _Commanded | None = None
 
     @property
     def clock(self) -> VehicleTimeClock:
@@ -240,6 +274,7 @@ class MavlinkVehicle:
             self._messages[name] = fields
             if name == "HEARTBEAT":
                 self._last_heartbeat_wall = time.monotonic()
+                self._heartbeat_confirms(fields)
             elif name == "PARAM_VALUE":
                 self._param_receipts += 1
                 param_id = str(fields.get("param_id", "")).rstrip("\x00")
@@ -249,6 +284,14 @@ class MavlinkVehicle:
                 self._status_texts.append(str(fields.get("text", "")))
             if "time_boot_ms" in fields:
                 self._clock.observe(fields["time_boot_ms"] / 1000.0)
+
+    def _heartbeat_confirms(self, fields: dict[str, Any]) -> None:
+        """Note a HEARTBEAT that reports a commanded state, so a later one reporting another counts at once."""
+        now_s = self._clock.now_s()
+        if self._commanded_mode is not None:
+            self._commanded_mode.reported(_heartbeat_mode(fields), now_s)
+        if self._commanded_armed is not None:
+            self._commanded_armed.reported(_heartbeat_armed(fields), now_s)
 
     def _check_link(self, operation: str) -> None:
         if self._closed or self._direct is None:
@@ -308,12 +351,12 @@ class MavlinkVehicle:
     async def arm(self) -> None:
         self._check_link("arm")
         await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 1, operation="arm")
-        self._commanded_armed = (True, time.monotonic())
+        self._commanded_armed = _Commanded(True, self._clock.now_s())
 
     async def disarm(self) -> None:
         self._check_link("disarm")
         await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 0, operation="disarm")
-        self._commanded_armed = (False, time.monotonic())
+        self._commanded_armed = _Commanded(False, self._clock.now_s())
 
     async def takeoff(self, *, altitude_rel_m: float) -> None:
         self._check_link("takeoff")
@@ -322,7 +365,7 @@ class MavlinkVehicle:
     async def set_mode(self, mode: FlightMode) -> None:
         self._check_link("set_mode")
         await self._command(MAV_CMD_DO_SET_MODE, 1, mode.value, operation="set_mode")
-        self._commanded_mode = (mode, time.monotonic())
+        self._commanded_mode = _Commanded(mode, self._clock.now_s())
 
     def _home_local(self) -> tuple[float, float, float]:
         home = self._messages.get("HOME_POSITION")
@@ -426,22 +469,18 @@ class MavlinkVehicle:
         gps = m.get("GPS_RAW_INT", {})
         distance = m.get("DISTANCE_SENSOR")
         hx, hy, hz = self._home_local()
-        try:
-            mode = FlightMode(int(heartbeat.get("custom_mode", 0)))
-        except ValueError:
-            mode = FlightMode.STABILIZE
-        armed = bool(int(heartbeat.get("base_mode", 0)) & 128)
-        heartbeat_wall = self._last_heartbeat_wall or 0.0
-        if self._commanded_armed is not None and self._commanded_armed[1] > heartbeat_wall:
-            armed = self._commanded_armed[0]
-        if self._commanded_mode is not None and self._commanded_mode[1] > heartbeat_wall:
-            mode = self._commanded_mode[0]
+        now_s = self._clock.now_s()
+        mode, armed = _heartbeat_mode(heartbeat), _heartbeat_armed(heartbeat)
+        if self._commanded_armed is not None:
+            armed = self._commanded_armed.reported(armed, now_s)
+        if self._commanded_mode is not None:
+            mode = self._commanded_mode.reported(mode, now_s)
         relative_m = glob.get("relative_alt", 0) / 1000.0
         rangefinder_valid = bool(distance) and distance["min_distance"] <= distance["current_distance"] <= \
             distance["max_distance"]
         height_m = distance["current_distance"] / 100.0 if rangefinder_valid else relative_m
         return Telemetry(
-            time_s=self._clock.now_s(),
+            time_s=now_s,
             armed=armed,
             mode=mode,
             landed_state=_LANDED.get(int(m.get("EXTENDED_SYS_STATE", {}).get("landed_state", 0)),
