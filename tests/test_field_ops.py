@@ -271,3 +271,27 @@ def test_a_heartbeat_sent_before_a_mode_change_but_read_after_its_ack_is_no_take
     assert heartbeat(FlightMode.STABILIZE, False, after_s=0.2).mode is FlightMode.STABILIZE
     with pytest.raises(PilotTakeover, match="mode STABILIZE, preland had set GUIDED"):
         heartbeat(FlightMode.STABILIZE, False, after_s=GuardedVehicle.CONFIRM_S)
+
+
+def test_a_stall_of_the_companion_shorter_than_a_wall_second_is_not_a_lost_link(monkeypatch):
+    """At 40x, 5 vehicle s of heartbeat silence is 0.125 wall s: a stall of preland's own process that long
+    is no lost link; a silence of more than LINK_LOST_MIN_WALL_S (and 5 vehicle s) is."""
+    import time
+
+    from preland_app.errors import LinkLost
+    from preland_app.vehicle.mavlink_backend import LINK_LOST_MIN_WALL_S, MavlinkVehicle
+
+    vehicle = MavlinkVehicle(url="udp://:14550", link_timeout_s=5.0)
+    clock = _SteppedClock()
+    clock.rate = 40.0
+    vehicle._clock = clock
+    vehicle._direct = _OneMessage("HEARTBEAT", {})
+    now = time.monotonic()
+    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now)
+    vehicle._last_heartbeat_wall = now - 0.5  # 20 vehicle s at 40x, half a wall second
+    vehicle._check_link("telemetry")
+    vehicle._last_heartbeat_wall = now - (LINK_LOST_MIN_WALL_S + 0.1)
+    with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 44.0 vehicle s"):
+        vehicle._check_link("telemetry")
+    clock.rate = 1.0  # at 1x the vehicle seconds decide: 1.1 s of silence is within 5
+    vehicle._check_link("telemetry")

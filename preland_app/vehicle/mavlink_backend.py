@@ -64,6 +64,10 @@ STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 
 # state stands until a HEARTBEAT reports it, or for this many vehicle seconds after the ACK (heartbeats come
 # at 1 to 10 Hz, so any later one was sent after the change and is believed).
 COMMANDED_STATE_GRACE_S = 2.0
+# Heartbeat silence is vehicle time reckoned from wall time (there is no message to stamp it), so at 40x the
+# 5 vehicle s of link_timeout_s would be 0.125 wall s, and a stall of preland's own process (a loaded
+# machine, a garbage collection) would read as a lost link. The link is lost only after this much wall time too.
+LINK_LOST_MIN_WALL_S = 1.0
 PARAM_TRIES = 3
 PARAM_TIMEOUT_S = 1.5  # wall seconds per try
 FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
@@ -297,8 +301,9 @@ class MavlinkVehicle:
         if self._closed or self._direct is None:
             raise VehicleError(operation=operation, reason="not connected")
         if self._last_heartbeat_wall is not None:
-            silent_vehicle_s = (time.monotonic() - self._last_heartbeat_wall) * self._clock.rate
-            if silent_vehicle_s > self.link_timeout_s:
+            silent_wall_s = time.monotonic() - self._last_heartbeat_wall
+            silent_vehicle_s = silent_wall_s * self._clock.rate
+            if silent_vehicle_s > self.link_timeout_s and silent_wall_s > LINK_LOST_MIN_WALL_S:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
 
     async def close(self) -> None:
