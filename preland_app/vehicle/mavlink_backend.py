@@ -66,8 +66,9 @@ STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 
 COMMANDED_STATE_GRACE_S = 2.0
 # Heartbeat silence is vehicle time reckoned from wall time (there is no message to stamp it), so at 40x the
 # 5 vehicle s of link_timeout_s would be 0.125 wall s, and a stall of preland's own process (a loaded
-# machine, a garbage collection) would read as a lost link. The link is lost only after this much wall time too.
-LINK_LOST_MIN_WALL_S = 1.0
+# machine, a garbage collection) would read as a lost link. The link is lost only after this much wall time too
+# (half a second: up to 10x, SITL's default speed-up, the 5 vehicle s alone decide).
+LINK_LOST_MIN_WALL_S = 0.5
 PARAM_TRIES = 3
 PARAM_TIMEOUT_S = 1.5  # wall seconds per try
 FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
