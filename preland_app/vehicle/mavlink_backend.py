@@ -181,10 +181,12 @@ class _Commanded:
     acked_at_s: float  # vehicle time of the COMMAND_ACK
     confirmed: bool = False
 
+    def confirm(self, heartbeat_value: Any) -> None:
+        """Note a HEARTBEAT's value: once one reports the commanded value, HEARTBEATs alone tell."""
+        self.confirmed = self.confirmed or heartbeat_value == self.value
+
     def reported(self, heartbeat_value: Any, now_s: float) -> Any:
         """What the vehicle is taken to be in, given the newest HEARTBEAT's `heartbeat_value`."""
-        if heartbeat_value == self.value:
-            self.confirmed = True
         if self.confirmed or now_s - self.acked_at_s >= COMMANDED_STATE_GRACE_S:
             return heartbeat_value
         return self.value
@@ -292,11 +294,10 @@ class MavlinkVehicle:
 
     def _heartbeat_confirms(self, fields: dict[str, Any]) -> None:
         """Note a HEARTBEAT that reports a commanded state, so a later one reporting another counts at once."""
-        now_s = self._clock.now_s()
         if self._commanded_mode is not None:
-            self._commanded_mode.reported(_heartbeat_mode(fields), now_s)
+            self._commanded_mode.confirm(_heartbeat_mode(fields))
         if self._commanded_armed is not None:
-            self._commanded_armed.reported(_heartbeat_armed(fields), now_s)
+            self._commanded_armed.confirm(_heartbeat_armed(fields))
 
     def _check_link(self, operation: str) -> None:
         if self._closed or self._direct is None:
