@@ -152,6 +152,31 @@ def test_an_executor_registered_by_name_runs_the_same_campaign(tmp_path, monkeyp
         create_executor("dask", ExecutorOptions())
 
 
+def test_one_local_worker_runs_its_trials_with_opencv_on_one_thread_and_gives_the_setting_back(tmp_path,
+                                                                                               monkeypatch):
+    import cv2
+
+    from preland_app.campaign.executors import local
+
+    seen = []
+
+    def observed(job):
+        seen.append(cv2.getNumThreads())
+        return run_job(job)
+
+    monkeypatch.setattr(local, "run_job", observed)
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(3)
+    try:
+        campaign = load_campaign(write_campaign(tmp_path, QUICK))
+        with ResultsStore(":memory:") as store:
+            assert run_campaign(campaign, store, workers=1) == (6, 6)
+        assert seen == [1] * 6
+        assert cv2.getNumThreads() == 3
+    finally:
+        cv2.setNumThreads(before)
+
+
 def test_bad_executor_options_give_one_line(tmp_path):
     path = write_campaign(tmp_path, QUICK)
     runner = CliRunner()
