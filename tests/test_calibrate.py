@@ -260,13 +260,13 @@ def test_the_report_marks_fitted_and_held_out_scenarios_and_what_the_fit_could_n
             if line.startswith("| gps") or line.startswith("| irlock")}
     assert rows["gps"][1] == "fitted" and rows["irlock"][1] == "held out"
     gps_errors = summaries[0].errors_cm()
-    assert rows["gps"][6] == f"{wasserstein_distance(gps_errors, [30.0, 50.0, 70.0]):.1f}"
-    assert rows["gps"][4] == "30.0..70.0"
+    assert rows["gps"][7] == f"{wasserstein_distance(gps_errors, [30.0, 50.0, 70.0]):.1f}"
+    assert rows["gps"][5] == "30.0..70.0"
     irlock_mean = sum(summaries[1].errors_cm()) / 3
-    assert rows["irlock"][5] == ("inside" if 20 <= irlock_mean <= 30 else "below" if irlock_mean < 20 else "above")
+    assert rows["irlock"][6] == ("inside" if 20 <= irlock_mean <= 30 else "below" if irlock_mean < 20 else "above")
     expected_note = ("inside in this run, not in the fit's own scoring trials (3.0 cm against 20.0..30.0)"
-                     if rows["irlock"][5] == "inside" else "the fit could not bring it inside (profile: 3.0 cm")
-    assert expected_note in rows["irlock"][9] and "could not" not in rows["gps"][9]
+                     if rows["irlock"][6] == "inside" else "the fit could not bring it inside (profile: 3.0 cm")
+    assert expected_note in rows["irlock"][10] and "could not" not in rows["gps"][10]
     assert "## Fidelity to the field" in (tmp_path / "report" / "tiny_cal.md").read_text()
 
 
@@ -282,9 +282,10 @@ def test_the_report_compares_with_a_published_range_and_says_when_defaults_were_
                                    source_path=str(campaign_path))
     row = next(line for line in section.splitlines() if line.startswith("| gps")).split(" | ")
     mean = summaries[0].avg_error_cm()
-    assert "model's defaults" in section and row[1] == "defaults" and row[4] == "51.0..144.0"
-    assert row[5] == ("inside" if 51 <= mean <= 144 else "below" if mean < 51 else "above")
-    assert row[6] == "-"  # no published trials: no distance
+    assert "model's defaults" in section and row[1] == "defaults" and row[5] == "51.0..144.0"
+    assert row[6] == ("inside" if 51 <= mean <= 144 else "below" if mean < 51 else "above")
+    assert row[7] == "-"  # no published trials: no distance
+    assert row[3] == "-"  # 2 trials: no confidence interval
 
 
 def test_the_fit_note_tells_a_run_inside_from_a_fit_that_could_not_reach_it(tmp_path):
@@ -317,10 +318,42 @@ def test_the_fit_note_tells_a_run_inside_from_a_fit_that_could_not_reach_it(tmp_
     rows = {row[0]: row for row in fidelity_rows(
         [summary("now inside", [22.0, 24.0, 26.0]), summary("still below", [10.0, 12.0, 14.0]),
          summary("was inside", [40.0, 44.0, 48.0])], load_profile(tmp_path / "fit.yaml"))}
-    assert rows["now inside"][5] == "inside"
-    assert rows["now inside"][9] == "inside in this run, not in the fit's own scoring trials (12.0 cm against 20.0..30.0)"
-    assert rows["still below"][5] == "below"
-    assert rows["still below"][9] == "the fit could not bring it inside (profile: 11.0 cm against 20.0..30.0)"
+    assert rows["now inside"][6] == "inside"
+    assert rows["now inside"][10] == "inside in this run, not in the fit's own scoring trials (12.0 cm against 20.0..30.0)"
+    assert rows["still below"][6] == "below"
+    assert rows["still below"][10] == "the fit could not bring it inside (profile: 11.0 cm against 20.0..30.0)"
     # The fit's own trials were inside: no note, even though this run's mean is above.
-    assert rows["was inside"][5] == "above" and rows["was inside"][9] == ""
-    assert rows["now inside"][6] == f"{wasserstein_distance([22.0, 24.0, 26.0], [20.0, 25.0, 30.0]):.1f}"
+    assert rows["was inside"][6] == "above" and rows["was inside"][10] == ""
+    assert rows["now inside"][7] == f"{wasserstein_distance([22.0, 24.0, 26.0], [20.0, 25.0, 30.0]):.1f}"
+
+
+def test_the_fidelity_note_says_when_the_means_interval_reaches_across_the_published_range():
+    """A mean inside the range whose 95 % CI reaches below its min, one below whose CI reaches inside, and
+    one whose CI lies wholly inside (no note); the summary line counts the unsettled ones."""
+    from types import SimpleNamespace
+
+    from preland_app.campaign.fidelity import fidelity_rows, fidelity_section
+    from preland_app.campaign.stats import describe
+
+    def summary(label, errors_cm):
+        return SimpleNamespace(
+            scenario=label, source="sim", reference=SimpleNamespace(min_error_cm=None),
+            published=[SimpleNamespace(error_cm=e) for e in (10.0, 20.0, 30.0)], errors_cm=lambda: errors_cm,
+            published_max_error_cm=lambda: 30.0, published_avg_error_cm=lambda: 20.0,
+            avg_landing_time_s=lambda: 20.0, published_avg_landing_time_s=lambda: 22.0)
+
+    wide_inside = [2.0, 3.0, 4.0, 25.0, 30.0, 6.0]  # mean 11.7, inside 10..30
+    near_below = [6.0, 7.0, 8.0, 9.0, 14.0, 9.5]  # mean 8.9, below 10
+    settled = [19.0, 20.0, 21.0, 20.5, 19.5]
+    summaries = [summary("wide", wide_inside), summary("near", near_below), summary("settled", settled)]
+    rows = {row[0]: row for row in fidelity_rows(summaries, None)}
+    wide, near = describe(wide_inside), describe(near_below)
+    assert wide.ci_low < 10.0 and near.ci_high >= 10.0  # the premise of the cases
+    assert rows["wide"][6] == "inside" and rows["wide"][3] == f"{wide.ci_low:.1f}..{wide.ci_high:.1f}"
+    assert rows["wide"][10] == f"its 95 % CI ({wide.ci_low:.1f}..{wide.ci_high:.1f}) reaches below the published min"
+    assert rows["near"][6] == "below"
+    assert rows["near"][10] == f"its 95 % CI ({near.ci_low:.1f}..{near.ci_high:.1f}) reaches inside"
+    assert rows["settled"][6] == "inside" and rows["settled"][10] == ""
+    section = fidelity_section(summaries, spec_text=None, source_path="c.yaml")
+    assert "2 of 3 simulated means inside the published min..max; for 2 of the 3, the mean's 95 % CI reaches " \
+           "across an end of the range." in section

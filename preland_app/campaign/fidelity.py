@@ -3,7 +3,8 @@
 The distance is the Wasserstein-1 (earth mover's) distance between the
 simulated and the field landing errors (scipy.stats.wasserstein_distance): in
 cm, how far the simulated distribution must move to become the field's. Beside
-it, whether the simulated mean falls inside the field's min..max. Used by
+it, whether the simulated mean falls inside the field's min..max, and whether
+the mean's 95 % confidence interval settles that. Used by
 `preland sim calibrate` (its objective and the profile's scores) and by the
 campaign report's fidelity section (`fidelity_section`), which also marks each
 scenario as fitted or held out when the campaign ran with a fitted profile.
@@ -19,6 +20,7 @@ from pathlib import Path
 import yaml
 
 from ..sim.profile import ProfileSpec, ScenarioScore
+from .stats import describe
 
 
 def wasserstein(a: Sequence[float], b: Sequence[float]) -> float:
@@ -97,10 +99,26 @@ def _role(profile: ProfileSpec | None, label: str) -> str:
     return "not in the fit"
 
 
+def _unsettled(spread, low: float | None, high: float | None, inside: str) -> str:
+    """A note when the mean's 95 % confidence interval reaches across an end of the published range: the
+    simulated trials do not settle on which side of it the model's mean lies."""
+    if spread is None or spread.ci_low is None or low is None or high is None:
+        return ""
+    interval = f"{spread.ci_low:.1f}..{spread.ci_high:.1f}"
+    if inside == "inside" and spread.ci_low < low:
+        return f"its 95 % CI ({interval}) reaches below the published min"
+    if inside == "inside" and spread.ci_high > high:
+        return f"its 95 % CI ({interval}) reaches above the published max"
+    if (inside == "below" and spread.ci_high >= low) or (inside == "above" and spread.ci_low <= high):
+        return f"its 95 % CI ({interval}) reaches inside"
+    return ""
+
+
 def fidelity_rows(summaries, profile: ProfileSpec | None) -> list[tuple[str, ...]]:
-    """One row per simulated scenario with published figures: role, simulated and published means, the
-    published min..max (published trials, else a published range), inside or not, the Wasserstein
-    distance to the published trials, the landing times, and what the fit says about it."""
+    """One row per simulated scenario with published figures: role, simulated mean and its 95 % confidence
+    interval (bootstrap, `stats.py`), the published mean and min..max (published trials, else a published
+    range), inside or not, the Wasserstein distance to the published trials, the landing times, and notes:
+    what the fit says about it, and whether the interval reaches across an end of the range."""
     rows = []
     for s in summaries:
         if s.source != "sim" or s.reference is None:
@@ -109,24 +127,29 @@ def fidelity_rows(summaries, profile: ProfileSpec | None) -> list[tuple[str, ...
         published = [p.error_cm for p in s.published]
         low = min(published) if published else s.reference.min_error_cm
         high = max(published) if published else s.published_max_error_cm()
-        mean = statistics.fmean(errors) if errors else None
+        spread = describe(errors)
+        mean = spread.mean if spread else None
         inside = "" if mean is None or low is None or high is None else ("inside" if low <= mean <= high else
                                                                          ("below" if mean < low else "above"))
+        interval = "" if spread is None or spread.ci_low is None else f"{spread.ci_low:.1f}..{spread.ci_high:.1f}"
         distance = f"{wasserstein(errors, published):.1f}" if errors and published else ""
         published_mean = s.published_avg_error_cm()
         sim_time, published_time = s.avg_landing_time_s(), s.published_avg_landing_time_s()
         role = _role(profile, s.scenario)
-        note = ""
+        notes = []
         score = profile.provenance.score_of(s.scenario) if profile and profile.provenance else None
         if score is not None and not score.inside:
             fit_said = f"{score.sim_mean_cm:.1f} cm against {score.field_min_cm:.1f}..{score.field_max_cm:.1f}"
-            note = (f"inside in this run, not in the fit's own scoring trials ({fit_said})" if inside == "inside"
-                    else f"the fit could not bring it inside (profile: {fit_said})")
-        rows.append((s.scenario, role, "" if mean is None else f"{mean:.1f}",
+            notes.append(f"inside in this run, not in the fit's own scoring trials ({fit_said})"
+                         if inside == "inside" else f"the fit could not bring it inside (profile: {fit_said})")
+        unsettled = _unsettled(spread, low, high, inside)
+        if unsettled:
+            notes.append(unsettled)
+        rows.append((s.scenario, role, "" if mean is None else f"{mean:.1f}", interval,
                      "" if published_mean is None else f"{published_mean:.1f}",
                      "" if low is None or high is None else f"{low:.1f}..{high:.1f}", inside, distance,
                      "" if sim_time is None else f"{sim_time:.1f}",
-                     "" if published_time is None else f"{published_time:.1f}", note))
+                     "" if published_time is None else f"{published_time:.1f}", "; ".join(notes)))
     return rows
 
 
@@ -145,16 +168,21 @@ def fidelity_section(summaries, *, spec_text: str | None, source_path: str) -> s
         how = f"the profile named by the {use.named_by} cannot be read now: {use.problem}"
     else:
         how = "simulated with the model's defaults (no profile)"
-    header = ("Scenario", "Role", "Sim mean (cm)", "Published mean (cm)", "Published min..max (cm)", "Mean",
+    header = ("Scenario", "Role", "Sim mean (cm)", "Sim mean 95 % CI (cm)", "Published mean (cm)", "Published min..max (cm)", "Mean",
               "Wasserstein-1 (cm)", "Sim time (s)", "Published time (s)", "Note")
     lines = ["## Fidelity to the field", "",
              f"Each scenario's simulated errors against the published ones: {how}. Role: fitted (the profile was "
              "fitted on its field trials), held out (scored only), not in the fit, or defaults. Mean: where the "
-             "simulated mean lies against the published min..max. Wasserstein-1: the distance between the "
+             "simulated mean lies against the published min..max; where the mean's 95 % confidence interval (a "
+             "bootstrap over the trials) reaches across an end of that range, the note says so: more trials "
+             "would be needed to settle on which side the model lies. Wasserstein-1: the distance between the "
              "simulated and published error distributions (where the published trials are given).", "",
              "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(cell or "-" for cell in row) + " |" for row in rows]
-    inside = sum(1 for row in rows if row[5] == "inside")
-    judged = sum(1 for row in rows if row[5])
-    lines += ["", f"{inside} of {judged} simulated means inside the published min..max."]
+    inside = sum(1 for row in rows if row[6] == "inside")
+    judged = sum(1 for row in rows if row[6])
+    unsettled = sum(1 for row in rows if "95 % CI" in row[10])
+    lines += ["", f"{inside} of {judged} simulated means inside the published min..max"
+              + (f"; for {unsettled} of the {judged}, the mean's 95 % CI reaches across an end of the range."
+                 if unsettled else ".")]
     return "\n".join(lines) + "\n"
