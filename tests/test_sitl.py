@@ -292,15 +292,26 @@ def test_normal_landings_on_real_sitl_miss_by_the_seeds_gps_error(thesis_mission
 
 @needs_real_sitl
 def test_the_table5_pair_on_real_sitl(thesis_mission):
+    """Cautious against default with the marker lost below 3 m on the first attempt, over five seeds: on
+    one seed a blind descent can land as close as a cautious one (seed 2: 7.1 against 8.1 cm), so the
+    comparison is of the means, as the thesis' is."""
     faults = {"marker": "below:3:first-attempt"}
-    default = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2, land_mode="marker", faults=faults,
-                                          takeoff_altitude_rel_m=6.0), options=_real())
-    cautious = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2, land_mode="cautious", sensor="marker",
-                                           faults=faults, takeoff_altitude_rel_m=6.0), options=_real())
-    assert default.outcome is cautious.outcome is Outcome.LANDED, (default.message, cautious.message)
-    assert cautious.details["attempts"] == 2 and cautious.details["marker_dropped"] > 0
-    assert cautious.landing_error_cm < default.landing_error_cm
-    assert cautious.landing_time_s > default.landing_time_s
+    defaults, cautious = [], []
+    for seed in range(1, 6):
+        defaults.append(run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed, land_mode="marker",
+                                                    faults=faults, takeoff_altitude_rel_m=6.0), options=_real()))
+        cautious.append(run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed, land_mode="cautious",
+                                                    sensor="marker", faults=faults, takeoff_altitude_rel_m=6.0),
+                                       options=_real()))
+    for default, careful in zip(defaults, cautious):
+        assert default.outcome is careful.outcome is Outcome.LANDED, (default.message, careful.message)
+        assert careful.details["attempts"] == 2 and careful.details["marker_dropped"] > 0
+        assert careful.landing_time_s > default.landing_time_s  # the climb and the second attempt
+        assert careful.landing_error_cm < 15.0  # the second attempt sees the marker to the ground
+    default_mean = sum(t.landing_error_cm for t in defaults) / len(defaults)
+    cautious_mean = sum(t.landing_error_cm for t in cautious) / len(cautious)
+    assert cautious_mean < default_mean, ([t.landing_error_cm for t in defaults],
+                                          [t.landing_error_cm for t in cautious])
 
 
 @needs_real_sitl
