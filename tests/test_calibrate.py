@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import functools
 from pathlib import Path
 
 import pytest
@@ -288,11 +289,21 @@ def test_the_report_compares_with_a_published_range_and_says_when_defaults_were_
     assert row[3] == "-"  # 2 trials: no confidence interval
 
 
+def _summary(label, errors_cm, *, published_cm):
+    """A simulated scenario's summary as the fidelity section reads it: `errors_cm` against published trials."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(
+        scenario=label, source="sim", reference=SimpleNamespace(min_error_cm=None),
+        published=[SimpleNamespace(error_cm=e) for e in published_cm], errors_cm=lambda: errors_cm,
+        published_max_error_cm=lambda: max(published_cm),
+        published_avg_error_cm=lambda: sum(published_cm) / len(published_cm),
+        avg_landing_time_s=lambda: 20.0, published_avg_landing_time_s=lambda: 22.0)
+
+
 def test_the_fit_note_tells_a_run_inside_from_a_fit_that_could_not_reach_it(tmp_path):
     """Where the profile's own scoring trials were outside the published range, the note says whether this
     run's mean is inside anyway or still outside; where they were inside, there is no note."""
-    from types import SimpleNamespace
-
     from preland_app.campaign.fidelity import fidelity_rows
 
     def score(label, *, inside, sim_mean_cm):
@@ -308,12 +319,7 @@ def test_the_fit_note_tells_a_run_inside_from_a_fit_that_could_not_reach_it(tmp_
                                          score("was inside", inside=True, sim_mean_cm=24.0)]}}
     write(tmp_path, "fit.yaml", yaml.safe_dump(profile))
 
-    def summary(label, errors_cm):
-        return SimpleNamespace(
-            scenario=label, source="sim", reference=SimpleNamespace(min_error_cm=None),
-            published=[SimpleNamespace(error_cm=e) for e in (20.0, 25.0, 30.0)], errors_cm=lambda: errors_cm,
-            published_max_error_cm=lambda: 30.0, published_avg_error_cm=lambda: 25.0,
-            avg_landing_time_s=lambda: 20.0, published_avg_landing_time_s=lambda: 22.0)
+    summary = functools.partial(_summary, published_cm=(20.0, 25.0, 30.0))
 
     rows = {row[0]: row for row in fidelity_rows(
         [summary("now inside", [22.0, 24.0, 26.0]), summary("still below", [10.0, 12.0, 14.0]),
@@ -330,17 +336,10 @@ def test_the_fit_note_tells_a_run_inside_from_a_fit_that_could_not_reach_it(tmp_
 def test_the_fidelity_note_says_when_the_means_interval_reaches_across_the_published_range():
     """A mean inside the range whose 95 % CI reaches below its min, one below whose CI reaches inside, and
     one whose CI lies wholly inside (no note); the summary line counts the unsettled ones."""
-    from types import SimpleNamespace
-
     from preland_app.campaign.fidelity import fidelity_rows, fidelity_section
     from preland_app.campaign.stats import describe
 
-    def summary(label, errors_cm):
-        return SimpleNamespace(
-            scenario=label, source="sim", reference=SimpleNamespace(min_error_cm=None),
-            published=[SimpleNamespace(error_cm=e) for e in (10.0, 20.0, 30.0)], errors_cm=lambda: errors_cm,
-            published_max_error_cm=lambda: 30.0, published_avg_error_cm=lambda: 20.0,
-            avg_landing_time_s=lambda: 20.0, published_avg_landing_time_s=lambda: 22.0)
+    summary = functools.partial(_summary, published_cm=(10.0, 20.0, 30.0))
 
     wide_inside = [2.0, 3.0, 4.0, 25.0, 30.0, 6.0]  # mean 11.7, inside 10..30
     near_below = [6.0, 7.0, 8.0, 9.0, 14.0, 9.5]  # mean 8.9, below 10
