@@ -202,6 +202,13 @@ def test_calibrate_recovers_the_parameters_that_made_synthetic_field_trials(tmp_
     gps = provenance.score_of("gps")
     assert gps.field_trials == 5 and gps.trials == 5 and gps.wasserstein_cm < 0.2 * gps.field_mean_cm
     assert "gps" in result.stdout and "held out" in result.stdout and f"wrote {out}" in result.stdout
+    # The field trials were flown on the fit's own seeds, so there the fit scores nearly 0; on other seeds
+    # (base seed 11 + 1 and + 2) the same values meet other draws, and the objective says how far apart
+    # two draws of the same model lie.
+    optimizer = provenance.optimizer
+    assert optimizer.fresh_base_seeds == (12, 13) and len(optimizer.fresh_seed_objectives) == 2
+    assert min(optimizer.fresh_seed_objectives) > optimizer.objective
+    assert f"objective on 2 other seed set(s): {optimizer.fresh_seed_objectives[0]:.3f}" in result.stdout
 
 
 def test_calibrate_refuses_what_it_cannot_fit_in_one_line(tmp_path):
@@ -220,6 +227,9 @@ def test_calibrate_refuses_what_it_cannot_fit_in_one_line(tmp_path):
     message = one_line_error(runner.invoke(app, [*base, "--params", "navigation.gps_drift_sigma_m",
                                                  "navigation.attitude_noise_sigma_deg", "--budget", "2"]))
     assert "--budget" in message
+    message = one_line_error(runner.invoke(app, [*base, "--params", "navigation.gps_drift_sigma_m",
+                                                 "--fresh-seed-sets", "-1"]))
+    assert "--fresh-seed-sets" in message and "must be >= 0" in message
     write(tmp_path, "tiny.yaml", TINY_MISSION.replace("physics_rate_hz: 50", "physics_rate_hz: 50, wind: {speed_m_s: 1}"))
     message = one_line_error(runner.invoke(app, [*base, "--params", "wind.speed_m_s"]))
     assert "wind.speed_m_s" in message and "cannot change it" in message

@@ -19,7 +19,10 @@ missing by a metre does not drown a precision one missing by centimetres).
 The optimizer is scipy's differential evolution: seeded, its initial population
 a Latin hypercube with the starting values as its first member, the whole
 population evaluated in one batch (all its trials in flight at once), no
-polishing, at most `budget` evaluations. The best values are then scored on
+polishing, at most `budget` evaluations. The best values are then flown again
+on `fresh_seed_sets` other sets of seeds (the campaign's with its base seed
+plus 1, 2, ...): the objective there against the objective on the fit's own
+seeds tells how much of the fit is the seeds' luck. Last they are scored on
 every scenario with field trials, fitted and held out, with `score_trials`
 trials each, and written as a profile with its provenance.
 """
@@ -55,6 +58,7 @@ DEFAULT_BUDGET = 20
 DEFAULT_TRIALS_PER_SCENARIO = 6
 DEFAULT_SCORE_TRIALS = 10
 DEFAULT_TIME_WEIGHT = 0.25
+DEFAULT_FRESH_SEED_SETS = 2
 POLL_S = 1.0
 
 Progress = Callable[[int, int], None]
@@ -79,6 +83,7 @@ class CalibrationRequest:
     trials_per_scenario: int = DEFAULT_TRIALS_PER_SCENARIO
     score_trials: int = DEFAULT_SCORE_TRIALS
     time_weight: float = DEFAULT_TIME_WEIGHT
+    fresh_seed_sets: int = DEFAULT_FRESH_SEED_SETS
     start: dict[str, float] | None = None
     name: str = "fitted"
 
@@ -91,6 +96,7 @@ class CalibrationResult:
     evaluations: int
     scores: tuple[ScenarioScore, ...]
     wall_time_s: float
+    fresh_seed_objectives: tuple[float, ...] = ()
 
 
 def check_request(request: CalibrationRequest) -> tuple[list[CalibratableParameter], list[str], list[str]]:
@@ -116,6 +122,8 @@ def check_request(request: CalibrationRequest) -> tuple[list[CalibratableParamet
         raise CalibrationError(f"--budget: must be >= {MIN_POPULATION} evaluations, got {request.budget}")
     if request.trials_per_scenario < 1 or request.score_trials < 1:
         raise CalibrationError("--trials-per-scenario: must be >= 1")
+    if request.fresh_seed_sets < 0:
+        raise CalibrationError(f"--fresh-seed-sets: must be >= 0, got {request.fresh_seed_sets}")
     if not request.time_weight >= 0:
         raise CalibrationError(f"--time-weight: must be >= 0, got {request.time_weight:g}")
     for parameter in parameters:
@@ -212,14 +220,16 @@ class Evaluator:
     def values(self, x: Sequence[float]) -> dict[str, float]:
         return {p.name: float(v) for p, v in zip(self.parameters, x)}
 
-    def fly(self, candidates: list[dict[str, float]], labels: Sequence[str], trials: int
-            ) -> list[dict[str, list[TrialRecord]]]:
-        """Each candidate's records per scenario label."""
+    def fly(self, candidates: list[dict[str, float]], labels: Sequence[str], trials: int, *,
+            base_seed: int | None = None) -> list[dict[str, list[TrialRecord]]]:
+        """Each candidate's records per scenario label; the campaign's seeds, or those of `base_seed`."""
         jobs: list[TrialJob] = []
         for number, values in enumerate(candidates):
             scenarios = self.flyer.scenarios(values, labels, trials)
             # The candidate's number rides in the campaign name; seeds stay the campaign's (common random numbers).
             campaign = replace(self.request.campaign, name=f"{number}")
+            if base_seed is not None:
+                campaign = replace(campaign, base_seed=base_seed)
             jobs.extend(plan_trials(campaign, scenarios, outcomes_only=True))
         results: list[dict[str, list[TrialRecord]]] = [{label: [] for label in labels} for _ in candidates]
 
@@ -238,11 +248,25 @@ class Evaluator:
         flown = self.fly(candidates, self.fitted, self.request.trials_per_scenario)
         scores = []
         for values, by_label in zip(candidates, flown):
-            score = statistics.fmean(scenario_term(by_label[label], self.request.field[label],
-                                                   self.request.time_weight) for label in self.fitted)
+            score = self.objective(by_label)
             self.history.append((values, score))
             scores.append(score)
         return np.array(scores)
+
+    def objective(self, by_label: dict[str, list[TrialRecord]]) -> float:
+        """The mean over fitted scenarios of their terms (see the module)."""
+        return statistics.fmean(scenario_term(by_label[label], self.request.field[label], self.request.time_weight)
+                                for label in self.fitted)
+
+    def fresh_seed_objectives(self, values: dict[str, float]) -> tuple[list[int], list[float]]:
+        """`values` flown on the fitted scenarios with the campaign's base seed plus 1, 2, ... (as many as
+        the request's fresh seed sets): those base seeds and the objective on each."""
+        base_seeds = [self.request.campaign.base_seed + k for k in range(1, self.request.fresh_seed_sets + 1)]
+        objectives = []
+        for base_seed in base_seeds:
+            (flown,) = self.fly([values], self.fitted, self.request.trials_per_scenario, base_seed=base_seed)
+            objectives.append(self.objective(flown))
+        return base_seeds, objectives
 
 
 def population_plan(budget: int, dimensions: int) -> tuple[int, int]:
@@ -270,7 +294,7 @@ def calibrate(request: CalibrationRequest, *, workers: int | None = None, execut
     high = np.array([p.high for p in parameters])
     init = low + unit * (high - low)
     init[0] = start
-    total_trials = (size * (generations + 1) * len(fitted) * request.trials_per_scenario
+    total_trials = ((size * (generations + 1) + request.fresh_seed_sets) * len(fitted) * request.trials_per_scenario
                     + (len(fitted) + len(held_out)) * request.score_trials)
     with create_executor(executor, ExecutorOptions(workers=workers)) as trial_executor:
         evaluator = Evaluator(request=request, flyer=flyer, parameters=parameters, fitted=fitted,
@@ -279,6 +303,7 @@ def calibrate(request: CalibrationRequest, *, workers: int | None = None, execut
                                         polish=False, rng=rng, vectorized=True, updating="deferred", tol=0.0)
         best = {name: rounded(value) for name, value in evaluator.values(result.x).items()}
         objective = float(result.fun)
+        fresh_base_seeds, fresh_objectives = evaluator.fresh_seed_objectives(best)
         labels = fitted + held_out
         (flown,) = evaluator.fly([best], labels, request.score_trials)
     scores = []
@@ -299,11 +324,14 @@ def calibrate(request: CalibrationRequest, *, workers: int | None = None, execut
                                          "start, no polish)", budget=request.budget,
                                   evaluations=len(evaluator.history), seed=request.seed,
                                   trials_per_scenario=request.trials_per_scenario, time_weight=request.time_weight,
-                                  objective=objective, wall_time_s=round(wall_time_s, 1)))
+                                  objective=objective, wall_time_s=round(wall_time_s, 1),
+                                  fresh_base_seeds=tuple(fresh_base_seeds),
+                                  fresh_seed_objectives=tuple(fresh_objectives)))
     profile = replace(profile, name=request.name, provenance=provenance,
                       description=profile.description or f"fitted on {request.data}")
     return CalibrationResult(profile=profile, best=best, objective=objective, evaluations=len(evaluator.history),
-                             scores=tuple(scores), wall_time_s=wall_time_s)
+                             scores=tuple(scores), wall_time_s=wall_time_s,
+                             fresh_seed_objectives=tuple(fresh_objectives))
 
 
 def rounded(value: float) -> float:

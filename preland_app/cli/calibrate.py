@@ -55,6 +55,9 @@ def sim_calibrate(
                                                  "seeds at every evaluation)."),
     score_trials: int = typer.Option(10, "--score-trials", help="Trials per scenario when scoring the result."),
     time_weight: float = typer.Option(0.25, "--time-weight", help="Weight of the landing-time distance."),
+    fresh_seed_sets: int = typer.Option(2, "--fresh-seed-sets",
+                                        help="Sets of other seeds the best values are flown on again, to tell "
+                                             "the fit from the seeds' luck (0: none)."),
     workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes (default: number of cores)."),
     out: Path = typer.Option(Path("profile.yaml"), "--out", help="Profile YAML to write."),
     name: Optional[str] = typer.Option(None, "--name", help="The profile's name (default: the file's stem)."),
@@ -90,7 +93,8 @@ def sim_calibrate(
         request = CalibrationRequest(campaign=campaign, field=field, data=data, params=tuple(params),
                                      holdout=tuple(holdout), budget=budget, seed=seed,
                                      trials_per_scenario=trials_per_scenario, score_trials=score_trials,
-                                     time_weight=time_weight, name=name or out.stem)
+                                     time_weight=time_weight, fresh_seed_sets=fresh_seed_sets,
+                                     name=name or out.stem)
         with progress_bar(enabled=not quiet) as advance:
             result = calibrate(request, workers=workers, progress=advance)
     except ExecutorError as error:
@@ -104,6 +108,10 @@ def sim_calibrate(
     fitted = ", ".join(f"{k} = {v:g}" for k, v in result.best.items())
     typer.echo(f"fitted {fitted} (objective {result.objective:.3f}, {result.evaluations} evaluations, "
                f"{result.wall_time_s:.0f} s)")
+    if result.fresh_seed_objectives:
+        typer.echo(f"objective on {len(result.fresh_seed_objectives)} other seed set(s): "
+                   + ", ".join(f"{value:.3f}" for value in result.fresh_seed_objectives)
+                   + f" (on the fit's own seeds {result.objective:.3f})")
     rows = [(s.label, s.role.replace("_", " "), f"{s.sim_mean_cm:.1f}", f"{s.field_mean_cm:.1f}",
              f"{s.field_min_cm:.1f}..{s.field_max_cm:.1f}", "yes" if s.inside else "no", f"{s.wasserstein_cm:.1f}")
             for s in result.scores]

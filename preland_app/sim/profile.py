@@ -64,7 +64,9 @@ class ScenarioScore:
 @dataclass(frozen=True, kw_only=True)
 class OptimizerRecord:
     """How the fit searched: `method`, the evaluation `budget` and those used, the `seed`, simulated
-    trials per scenario and evaluation, and the objective's landing-time weight."""
+    trials per scenario and evaluation, and the objective's landing-time weight; the best values'
+    `objective` on the fit's own seeds and, flown again with the campaign's base seed replaced by each of
+    `fresh_base_seeds`, on other seeds (`fresh_seed_objectives`)."""
 
     method: str
     budget: int
@@ -74,6 +76,8 @@ class OptimizerRecord:
     time_weight: float = 0.0
     objective: float | None = None
     wall_time_s: float | None = None
+    fresh_base_seeds: tuple[int, ...] = ()
+    fresh_seed_objectives: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)
