@@ -97,7 +97,7 @@ def test_camera_land_modes_over_mavlink(thesis_mission, mode, faults):
 
 
 @pytest.mark.parametrize("mode", ["paper_adaptive", "paper_static"])
-@pytest.mark.xdist_group("camera_in_real_time")
+@pytest.mark.xdist_group("paper_camera_in_real_time")
 def test_paper_algorithms_over_mavlink(mode):
     from preland_app.config.mission import load_mission
 
