@@ -54,6 +54,26 @@ def test_a_region_is_the_whole_frame_cropped_there(camera, effects):
     assert differing <= 0.002 * compared
 
 
+def test_sensor_noise_saturates_at_black_and_white():
+    """The frame is the noiseless frame plus its noise draw, held to 0..255 (no 8-bit wrap-around)."""
+    renderer = VirtualCamera(camera=RPI_CAMERA_V2_640X480, pad=PAPER_PAD, pad_origin_ned_m=(0.0, 0.0),
+                             rng=np.random.default_rng(4), effects=ImageEffects(noise_sigma=60.0))
+    shot = renderer.capture(CameraPose(0.1, 0.0, -3.0, 0.02, -0.01, 0.4))
+    frame = renderer.render_shot(shot)
+    clean = renderer.render_shot(replace(shot, noise=None)).astype(int)
+    index, dy, dx = shot.noise
+    noise = renderer._noise_bank[index][dy:dy + 480, dx:dx + 640].astype(int)
+    assert frame.dtype == np.uint8
+    assert np.array_equal(frame, np.clip(clean + noise, 0, 255))
+    # Both ends are reached, where the sum leaves the 8-bit range: the pad's black and white and the noise.
+    assert np.count_nonzero(clean + noise < 0) > 1000 and np.count_nonzero(clean + noise > 255) > 1000
+    # A region: its own noiseless pixels plus the same noise at the same place, held likewise.
+    x0, y0, x1, y1 = 100, 50, 300, 200
+    clean_part = renderer.render_shot(replace(shot, noise=None), (x0, y0, x1, y1)).astype(int)
+    assert np.array_equal(renderer.render_shot(shot, (x0, y0, x1, y1)),
+                          np.clip(clean_part + noise[y0:y1, x0:x1], 0, 255))
+
+
 def _recording_renderer():
     """A virtual camera over the paper pad, and the list of the regions it draws (None: the whole frame)."""
     renderer = VirtualCamera(camera=RPI_CAMERA_V2_640X480, pad=PAPER_PAD, pad_origin_ned_m=(0.0, 0.0),

@@ -113,6 +113,20 @@ class VirtualCamera:
         self._undistort_maps = self._make_distortion_maps() if camera.has_distortion else None
         self._pad_outline = _pad_outline_m(pad)
         self._markers_corners_pad = np.vstack([pad.marker_corners_pad_m(marker) for marker in pad.markers])
+        self._markers_corners_h = np.vstack([self._markers_corners_pad.T, np.ones(len(self._markers_corners_pad))])
+        # The frame-independent homographies, built once (the same values `capture` used to build per frame).
+        half = FIELD_EXTENT_M / 2.0
+        ppm = FIELD_PX_PER_M
+        self._bg_to_ground = np.array([[0.0, -1.0 / ppm, half], [1.0 / ppm, 0.0, -half], [0.0, 0.0, 1.0]])
+        c, s = math.cos(self.pad_yaw_rad), math.sin(self.pad_yaw_rad)
+        self._pad_rotate = np.array([[c, -s, pad_origin_ned_m[0]], [s, c, pad_origin_ned_m[1]], [0.0, 0.0, 1.0]])
+        size_m = pad.size_m
+        # Per pyramid level, from the finest: (px per m, texture, pad texture pixel -> pad frame (north, east)).
+        self._pad_level_maps = tuple(
+            (level_ppm, texture, np.array([[0.0, -1.0 / level_ppm, size_m / 2.0],
+                                           [1.0 / level_ppm, 0.0, -size_m / 2.0],
+                                           [0.0, 0.0, 1.0]]))
+            for level_ppm, texture in self._pad_levels)
         # The sources in the ideal image of every 8th pixel (and the last row and column), to bound where lens
         # distortion draws a region; a box narrower than twice their widest spacing is not bounded.
         self._map_samples = None
@@ -176,32 +190,24 @@ class VirtualCamera:
         asked for): the layers' homographies, the pad's pyramid level and this frame's sensor-noise draw."""
         ground_to_image = self._ground_homography(pose)
         # Background: texture pixel (col, row) -> ground (north, east), field centred on the origin.
-        half = FIELD_EXTENT_M / 2.0
-        ppm = FIELD_PX_PER_M
-        bg_to_ground = np.array([[0.0, -1.0 / ppm, half], [1.0 / ppm, 0.0, -half], [0.0, 0.0, 1.0]])
-        image_to_bg = np.linalg.inv(ground_to_image @ bg_to_ground)
+        image_to_bg = np.linalg.inv(ground_to_image @ self._bg_to_ground)
         # Pad: the coarsest pyramid level that still has twice the image's ground resolution
         # (sharp edges for the detector, no aliasing from high up).
         height_m = max(0.05, -pose.down_m)
         image_ppm = self.camera.fx_px / height_m
-        level_ppm, texture = self._pad_levels[0]
-        for candidate_ppm, candidate in self._pad_levels:
+        levels = self._pad_level_maps
+        _, texture, pad_to_ground_local = levels[0]
+        for candidate_ppm, candidate, candidate_map in levels:
             if candidate_ppm >= 2.0 * image_ppm:
-                level_ppm, texture = candidate_ppm, candidate
-        size_m = self.pad.size_m
-        c, s = math.cos(self.pad_yaw_rad), math.sin(self.pad_yaw_rad)
-        pad_to_ground_local = np.array([[0.0, -1.0 / level_ppm, size_m / 2.0],
-                                        [1.0 / level_ppm, 0.0, -size_m / 2.0],
-                                        [0.0, 0.0, 1.0]])
-        rotate = np.array([[c, -s, self.pad_origin_ned_m[0]], [s, c, self.pad_origin_ned_m[1]], [0.0, 0.0, 1.0]])
-        image_to_pad = np.linalg.inv(ground_to_image @ rotate @ pad_to_ground_local)
-        pad_to_image = ground_to_image @ rotate
+                texture, pad_to_ground_local = candidate, candidate_map
+        pad_to_image = ground_to_image @ self._pad_rotate
+        image_to_pad = np.linalg.inv(pad_to_image @ pad_to_ground_local)
         noise = None
         if self.effects.noise_sigma > 0:
             # Sensor noise: one of a bank of pre-drawn noise fields, shifted by a random offset
             # (drawing 300k normals per frame would cost more than rendering it).
             index = int(self._rng.integers(len(self._noise_bank)))
-            dy, dx = (int(v) for v in self._rng.integers(0, 32, size=2))
+            dy, dx = self._rng.integers(0, 32, size=2).tolist()
             noise = (index, dy, dx)
         return Shot(image_to_background=image_to_bg, image_to_pad=image_to_pad, pad_texture=texture, noise=noise,
                     pad_to_image=pad_to_image,
@@ -216,17 +222,18 @@ class VirtualCamera:
 
     def _markers_extent_px(self, pad_to_image: np.ndarray) -> tuple[float, float, float, float] | tuple[()]:
         """The box (pinhole image px) drawn into by the markers wholly in the frame; () when there are none."""
-        corners = self._markers_corners_pad
-        projected = pad_to_image @ np.vstack([corners.T, np.ones(len(corners))])
+        # In Python floats: a handful of corners, where numpy's per-call cost would be most of the work.
+        xs, ys, depths = (pad_to_image @ self._markers_corners_h).tolist()
         w, h = self._size
         spread = 2.0 + self._blur_radius_px
         box = None
-        for start in range(0, len(corners), 4):
-            depth = projected[2, start:start + 4]
-            if depth.min() <= 1e-6:
+        for start in range(0, len(xs), 4):
+            depth = depths[start:start + 4]
+            if min(depth) <= 1e-6:
                 continue
-            u, v = projected[0, start:start + 4] / depth, projected[1, start:start + 4] / depth
-            u0, v0, u1, v1 = float(u.min()), float(v.min()), float(u.max()), float(v.max())
+            u = [x / d for x, d in zip(xs[start:start + 4], depth)]
+            v = [y / d for y, d in zip(ys[start:start + 4], depth)]
+            u0, v0, u1, v1 = min(u), min(v), max(u), max(v)
             if u0 < -1.0 or v0 < -1.0 or u1 > w or v1 > h:
                 continue  # reaches past the frame's edge: no detector finds it
             box = (u0, v0, u1, v1) if box is None else (min(box[0], u0), min(box[1], v0),
@@ -298,7 +305,9 @@ class VirtualCamera:
         if shot.noise is not None:
             index, dy, dx = shot.noise
             noise = self._noise_bank[index][dy + y0:dy + y1, dx + x0:dx + x1]
-            frame = np.clip(frame.astype(np.int16) + noise, 0, 255).astype(np.uint8)
+            # The 8-bit frame plus the int16 noise, saturated to 0..255 in one pass (numpy's widen, add, clip
+            # and narrow give the same pixels in four).
+            frame = cv2.add(frame, noise, dtype=cv2.CV_8U)
         return np.ascontiguousarray(frame)
 
     def _warp_layers(self, shot: Shot, region: tuple[int, int, int, int]) -> np.ndarray:

@@ -9,6 +9,7 @@ because blocks are always drawn with the same size.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import math
 
 import numpy as np
@@ -17,22 +18,19 @@ _BLOCK = 4096
 
 
 class GaussianStream:
-    """Standard-normal samples from one Generator, drawn in blocks."""
+    """Standard-normal samples from one Generator, drawn in blocks. `next()` gives the next sample."""
 
-    __slots__ = ("_rng", "_block", "_i")
+    __slots__ = ("next",)
 
     def __init__(self, rng: np.random.Generator) -> None:
-        self._rng = rng
-        self._block: list[float] = []
-        self._i = 0
+        def blocks():
+            while True:
+                yield rng.standard_normal(_BLOCK).tolist()
 
-    def next(self) -> float:
-        if self._i >= len(self._block):
-            self._block = self._rng.standard_normal(_BLOCK).tolist()
-            self._i = 0
-        value = self._block[self._i]
-        self._i += 1
-        return value
+        # A C-level iterator over the blocks, each drawn when the first of its samples is asked for: the
+        # simulator asks for several samples a physics step, where a Python-level method's call and
+        # bookkeeping would cost more than the sample.
+        self.next = itertools.chain.from_iterable(blocks()).__next__
 
 
 class GaussMarkov:

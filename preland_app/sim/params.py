@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import KW_ONLY, dataclass
 
 import numpy as np
@@ -153,6 +154,8 @@ class ParameterTable:
 
     def __init__(self, overrides: dict[str, float] | None = None) -> None:
         self._values: dict[str, float] = {name: float(info.default) for name, info in ARDUCOPTER_PARAMS.items()}
+        # `value(name)`: the stored value, straight from the dict (the autopilot reads a dozen a physics step).
+        self.value: Callable[[str], float] = self._values.__getitem__
         for name, value in (overrides or {}).items():
             self.set(name, value)
 
@@ -189,5 +192,3 @@ class ParameterTable:
         """A cm/s (or cm/s/s, cm) parameter in m/s (m/s/s, m)."""
         return self._values[name] / 100.0
 
-    def value(self, name: str) -> float:
-        return self._values[name]
