@@ -109,12 +109,12 @@ class VirtualCamera:
         self._k = camera.camera_matrix
         self._size = (camera.width_px, camera.height_px)
         self._ground = GrassTexture(rng=rng)
-        self._pad_levels = self._make_pad_pyramid(pad)
         self._undistort_maps = self._make_distortion_maps() if camera.has_distortion else None
         self._pad_outline = _pad_outline_m(pad)
-        self._markers_corners_pad = np.vstack([pad.marker_corners_pad_m(marker) for marker in pad.markers])
-        self._markers_corners_h = np.vstack([self._markers_corners_pad.T, np.ones(len(self._markers_corners_pad))])
-        # The frame-independent homographies, built once (the same values `capture` used to build per frame).
+        # Every marker's corners, pad frame (north, east, 1), one column each, four per marker.
+        corners = np.vstack([pad.marker_corners_pad_m(marker) for marker in pad.markers])
+        self._markers_corners_h = np.vstack([corners.T, np.ones(len(corners))])
+        # The parts of each frame's homographies that do not depend on the pose, built once per camera.
         half = FIELD_EXTENT_M / 2.0
         ppm = FIELD_PX_PER_M
         self._bg_to_ground = np.array([[0.0, -1.0 / ppm, half], [1.0 / ppm, 0.0, -half], [0.0, 0.0, 1.0]])
@@ -126,7 +126,7 @@ class VirtualCamera:
             (level_ppm, texture, np.array([[0.0, -1.0 / level_ppm, size_m / 2.0],
                                            [1.0 / level_ppm, 0.0, -size_m / 2.0],
                                            [0.0, 0.0, 1.0]]))
-            for level_ppm, texture in self._pad_levels)
+            for level_ppm, texture in self._make_pad_pyramid(pad))
         # The sources in the ideal image of every 8th pixel (and the last row and column), to bound where lens
         # distortion draws a region; a box narrower than twice their widest spacing is not bounded.
         self._map_samples = None
