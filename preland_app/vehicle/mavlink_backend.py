@@ -104,12 +104,6 @@ class VehicleTimeClock:
         return bool(self._samples)
 
     @property
-    def observed_s(self) -> float:
-        """The vehicle time of the newest message read (0 before any): unlike `now_s()`, it does not run on
-        while preland's own process stalls and messages queue up unread."""
-        return self._samples[-1][1] if self._samples else 0.0
-
-    @property
     def settled(self) -> bool:
         """True once the rate has been measured over at least a second of messages."""
         return len(self._samples) > 2 and self._samples[-1][0] - self._samples[0][0] >= 1.0
@@ -191,11 +185,9 @@ class _Commanded:
         """Note a HEARTBEAT's value: once one reports the commanded value, HEARTBEATs alone tell."""
         self.confirmed = self.confirmed or heartbeat_value == self.value
 
-    def reported(self, heartbeat_value: Any, observed_s: float) -> Any:
-        """What the vehicle is taken to be in, given the newest HEARTBEAT's `heartbeat_value` and the vehicle
-        time of the newest message read (`observed_s`: a HEARTBEAT read after a stall of preland's own
-        process may be older than the clock's reading, never than the messages read with it)."""
-        if self.confirmed or observed_s - self.acked_at_s >= COMMANDED_STATE_GRACE_S:
+    def reported(self, heartbeat_value: Any, now_s: float) -> Any:
+        """What the vehicle is taken to be in, given the newest HEARTBEAT's `heartbeat_value`."""
+        if self.confirmed or now_s - self.acked_at_s >= COMMANDED_STATE_GRACE_S:
             return heartbeat_value
         return self.value
 
@@ -486,11 +478,10 @@ class MavlinkVehicle:
         hx, hy, hz = self._home_local()
         now_s = self._clock.now_s()
         mode, armed = _heartbeat_mode(heartbeat), _heartbeat_armed(heartbeat)
-        observed_s = self._clock.observed_s
         if self._commanded_armed is not None:
-            armed = self._commanded_armed.reported(armed, observed_s)
+            armed = self._commanded_armed.reported(armed, now_s)
         if self._commanded_mode is not None:
-            mode = self._commanded_mode.reported(mode, observed_s)
+            mode = self._commanded_mode.reported(mode, now_s)
         relative_m = glob.get("relative_alt", 0) / 1000.0
         rangefinder_valid = bool(distance) and distance["min_distance"] <= distance["current_distance"] <= \
             distance["max_distance"]
