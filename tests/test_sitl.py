@@ -1,6 +1,7 @@
 """The SITL runtime: a fake `arducopter` for launching, stopping and orphans; the real one when it is there."""
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -284,9 +285,13 @@ def test_the_paper_algorithms_land_on_real_sitl(mode):
 
 @needs_real_sitl
 def test_normal_landings_on_real_sitl_miss_by_the_seeds_gps_error(thesis_mission):
-    errors = [run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed), options=_real()).landing_error_cm
-              for seed in (1, 2, 3)]
-    assert len({round(e) for e in errors}) == 3  # different seeds, different GPS errors
+    outcomes = [run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed), options=_real())
+                for seed in (1, 2, 3)]
+    errors = [o.landing_error_cm for o in outcomes]
+    # Different seeds, different GPS errors: the touchdowns lie apart. (Their distances from the pad may
+    # not: seeds 1 and 3 both miss by about 65 cm, in directions 90 degrees apart.)
+    points = [(o.offset_north_cm, o.offset_east_cm) for o in outcomes]
+    assert all(math.dist(a, b) > 10.0 for i, a in enumerate(points) for b in points[i + 1:]), points
     assert 5.0 < sum(errors) / len(errors) < 250.0
 
 
