@@ -11,6 +11,7 @@ from preland_app.runtime.embedded import TrialRequest
 from preland_app.runtime.mavlink import fly_mavlink
 from preland_app.sim.mavlink_face import MavlinkFace
 from preland_app.sim.simulator import Simulator
+from preland_app.vehicle.types import FlightMode
 
 from .test_mavlink_face import free_port
 
@@ -75,6 +76,38 @@ def test_thesis_mission_over_mavlink(thesis_mission, mode):
     else:
         assert 5.0 < outcome.landing_error_cm < 300.0
     assert 15.0 < outcome.landing_time_s < 40.0
+
+
+def test_a_stalled_truth_stream_blinds_the_sensors_instead_of_showing_old_views(thesis_mission):
+    # SIM_STATE stops for 2.5 vehicle s, half a second into LAND, while the rest of the telemetry goes on (a
+    # stalled link or process). Readings of the last pose stamped with the present had the autopilot chase a
+    # target that was not there: 25 m off; stamped with the pose's time and sent for 0.25 s, 5 to 19 m off.
+    served = ServedSimulator(thesis_mission, seed=4)
+    while served.face is None:
+        threading.Event().wait(0.01)
+    send_sim_state, stall = served.face._send_sim_state, {"land_s": None, "skipped": 0}
+
+    def stalled_sim_state() -> None:
+        simulator = served.simulator
+        if simulator.autopilot.mode is FlightMode.LAND:
+            stall["land_s"] = simulator.time_s if stall["land_s"] is None else stall["land_s"]
+            if 0.5 <= simulator.time_s - stall["land_s"] < 3.0:
+                stall["skipped"] += 1
+                return
+        send_sim_state()
+
+    served.face._send_sim_state = stalled_sim_state
+    try:
+        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=thesis_mission, seed=4, land_mode="irlock"),
+                                          url=served.url))
+    finally:
+        served.stop()
+    assert stall["skipped"] >= 40  # 20 Hz for 2.5 s
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    assert outcome.landing_error_cm < 15.0
+    # The IR-LOCK's 50 Hz ticks in the stall gave nothing (and a few outside it, between two SIM_STATEs).
+    print("waits", outcome.details["ticks_without_new_truth"], "error cm", outcome.landing_error_cm)
+    assert outcome.details["ticks_without_new_truth"] >= 120
 
 
 @pytest.mark.xdist_group("camera_in_real_time")

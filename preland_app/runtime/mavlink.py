@@ -58,6 +58,10 @@ class SimStateTruth:
         north, east, down = self._plane.to_ned(self._point(state))
         return CameraPose(north, east, down, state["roll"], state["pitch"], state["yaw"])
 
+    def time_s(self) -> float:
+        """The vehicle time (s) of the newest SIM_STATE: what the autopilot had reported when it came."""
+        return self.vehicle.sim_state_time_s()
+
     def ned(self) -> tuple[float, float, float]:
         pose = self.pose()
         return pose.north_m, pose.east_m, -pose.down_m
@@ -97,6 +101,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     real_camera = frame_source or (_open_camera(camera_source, mission, clock) if camera_source else None)
     sensors = build_sensor_suite(mission=mission, seed=request.seed,
                                  true_pose=truth_source.pose if truth_source else _no_truth, clock=clock,
+                                 pose_time_s=truth_source.time_s if truth_source else None,
                                  camera=strategy.uses_marker and real_camera is None, irlock=strategy.uses_irlock)
     if real_camera is not None:
         sensors.camera = real_camera
@@ -176,6 +181,10 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     details = dict(runner.report.landing.details) if runner.report.landing else {}
     details["runtime"] = "mavlink"
     details["clock_rate"] = round(clock.rate, 2)
+    # Sensor ticks that gave nothing because no SIM_STATE had come since the last reading.
+    waits = [getattr(source, "ticks_without_new_truth", None) for source in (sensors.camera, sensors.irlock)]
+    if any(count is not None for count in waits):
+        details["ticks_without_new_truth"] = sum(count or 0 for count in waits)
     if vehicle.tlog is not None:
         details["tlog"] = str(vehicle.tlog.path)
         details["tlog_messages"] = vehicle.tlog.written

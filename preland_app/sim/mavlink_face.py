@@ -229,9 +229,12 @@ class MavlinkFace(GroundStationServices):
         now = self.simulator.time_s
         next_send_s = self._channel.next_send_s
         for message_id, interval_s in list(self.intervals_s.items()):
-            if interval_s <= 0 or now < next_send_s.get(message_id, 0.0):
+            due_s = next_send_s.get(message_id, 0.0)
+            if interval_s <= 0 or now < due_s - 1e-9:
                 continue
-            next_send_s[message_id] = now + interval_s
+            # On a fixed grid, so a stream keeps its rate when the interval is not a whole number of physics
+            # steps (50 Hz asked of `now + interval` on 100 Hz steps gave 44 Hz); from now after a long gap.
+            next_send_s[message_id] = due_s + interval_s if now - due_s < interval_s else now + interval_s
             self.send_message(message_id)
 
     def send_message(self, message_id: int) -> bool:

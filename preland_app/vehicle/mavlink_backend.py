@@ -69,6 +69,9 @@ COMMANDED_STATE_GRACE_S = 2.0
 # machine, a garbage collection) would read as a lost link. The link is lost only after this much wall time too
 # (half a second: up to 10x, SITL's default speed-up, the 5 vehicle s alone decide).
 LINK_LOST_MIN_WALL_S = 0.5
+# Ground truth for the simulated sensors: each of their readings needs a SIM_STATE of its own, and the
+# IR-LOCK reads at 50 Hz.
+SIM_STATE_HZ = 50
 PARAM_TRIES = 3
 PARAM_TIMEOUT_S = 1.5  # wall seconds per try
 FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
@@ -102,6 +105,7 @@ class VehicleTimeClock:
     @property
     def ready(self) -> bool:
         return bool(self._samples)
+
 
     @property
     def settled(self) -> bool:
@@ -205,6 +209,7 @@ class MavlinkVehicle:
         self.want_truth = want_truth
         self._clock = VehicleTimeClock()
         self._messages: dict[str, dict[str, Any]] = {}
+        self._sim_state_time_s = 0.0
         self._status_texts: list[str] = []
         self._last_heartbeat_wall: float | None = None
         self._sdk = None
@@ -261,7 +266,7 @@ class MavlinkVehicle:
     async def _request_streams(self) -> None:
         streams = dict(STREAMS_HZ)
         if self.want_truth:
-            streams["SIM_STATE"] = 20
+            streams["SIM_STATE"] = SIM_STATE_HZ
         for name, rate_hz in streams.items():
             await self._command(MAV_CMD_SET_MESSAGE_INTERVAL, MESSAGE_IDS[name], 1e6 / rate_hz,
                                 operation="set_message_interval", check=False)
@@ -289,6 +294,10 @@ class MavlinkVehicle:
                                                 int(fields.get("param_type", 9)), self._param_receipts)
             elif name == "STATUSTEXT":
                 self._status_texts.append(str(fields.get("text", "")))
+            elif name == "SIM_STATE":
+                # SIM_STATE has no timestamp: the clock when it is read. The clock runs from the wall time at
+                # which the newest time_boot_ms was read, so a backlog read late still reads as old.
+                self._sim_state_time_s = self._clock.now_s()
             if "time_boot_ms" in fields:
                 self._clock.observe(fields["time_boot_ms"] / 1000.0)
 
@@ -519,6 +528,10 @@ class MavlinkVehicle:
     def sim_state(self) -> dict[str, Any] | None:
         """The latest SIM_STATE (ground truth from SITL or the simulator), if asked for and received."""
         return self._messages.get("SIM_STATE")
+
+    def sim_state_time_s(self) -> float:
+        """The vehicle time (s) of the latest SIM_STATE: the clock's reading when it was read."""
+        return self._sim_state_time_s
 
     async def wait_for_truth(self, timeout_s: float = 10.0) -> dict[str, Any]:
         deadline = time.monotonic() + timeout_s
