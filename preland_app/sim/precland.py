@@ -54,7 +54,9 @@ class _AxisFilter:
     def __init__(self, position: float, variance: float) -> None:
         self.position = position
         self.velocity = 0.0
-        self.p00, self.p01, self.p11 = variance, 0.0, 1.0  # ArduPilot starts with 1 (m/s)^2 on velocity
+        # Zero velocity with 1 (m/s)^2. AC_PrecLand (3.6/4.0) starts at minus the vehicle's velocity with
+        # 2^2: a departure that the README names.
+        self.p00, self.p01, self.p11 = variance, 0.0, 1.0
 
     def predict(self, dt_s: float, delta_velocity: float, delta_velocity_noise: float) -> None:
         self.position += self.velocity * dt_s
