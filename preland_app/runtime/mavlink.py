@@ -59,7 +59,7 @@ class SimStateTruth:
         return CameraPose(north, east, down, state["roll"], state["pitch"], state["yaw"])
 
     def time_s(self) -> float:
-        """The vehicle time (s) of the newest SIM_STATE: what the autopilot had reported when it came."""
+        """The vehicle time (s) of the newest SIM_STATE: the vehicle clock's reading when it was read."""
         return self.vehicle.sim_state_time_s()
 
     def ned(self) -> tuple[float, float, float]:

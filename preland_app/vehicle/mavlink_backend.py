@@ -106,7 +106,6 @@ class VehicleTimeClock:
     def ready(self) -> bool:
         return bool(self._samples)
 
-
     @property
     def settled(self) -> bool:
         """True once the rate has been measured over at least a second of messages."""
