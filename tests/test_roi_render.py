@@ -268,3 +268,25 @@ def test_every_marker_the_whole_frame_shows_lies_inside_the_markers_extent(camer
                     assert (detection.corners_px.min(axis=0) >= extent[:2]).all()
                     assert (detection.corners_px.max(axis=0) <= extent[2:]).all()
         assert found >= 10 and none_in_view >= 3
+
+
+@pytest.mark.parametrize("camera", [RPI_CAMERA_V2_640X480, DISTORTED], ids=["pinhole", "distorted"])
+def test_a_region_the_pad_covers_draws_no_ground_and_matches_the_whole_frame(camera):
+    # 3 m above the paper pad (1.8 m): the pad fills the middle of the frame, the ground its edges.
+    pose = CameraPose(0.1, -0.1, -3.0, 0.03, -0.02, 0.4)
+    fresh = VirtualCamera(camera=camera, pad=PAPER_PAD, pad_origin_ned_m=(0.0, 0.0), rng=np.random.default_rng(5))
+    region = (260, 180, 380, 300)
+    part = fresh.render_shot(fresh.capture(pose), region)
+    assert fresh._ground.tiles_drawn == 0  # no ground was drawn for it
+
+    reference = VirtualCamera(camera=camera, pad=PAPER_PAD, pad_origin_ned_m=(0.0, 0.0), rng=np.random.default_rng(5))
+    shot = reference.capture(pose)
+    whole = reference.render_shot(shot)
+    assert reference._ground.tiles_drawn > 0
+    x0, y0, x1, y1 = region
+    crop = whole[y0:y1, x0:x1].astype(int)
+    assert np.abs(part.astype(int) - crop).max() <= 1
+    assert np.count_nonzero(part != whole[y0:y1, x0:x1]) <= 0.002 * crop.size
+    # A region reaching past the pad's sheet still draws the ground under it, the same as the whole frame.
+    edge = reference.render_shot(shot, (0, 0, 160, 120)).astype(int)
+    assert np.abs(edge - whole[:120, :160].astype(int)).max() <= 1

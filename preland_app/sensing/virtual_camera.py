@@ -319,9 +319,14 @@ class VirtualCamera:
             shift = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
             image_to_bg, image_to_pad = image_to_bg @ shift, image_to_pad @ shift
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-        self._ground.ensure_read_by(image_to_bg, size)
-        frame = cv2.warpPerspective(self._ground.pixels, image_to_bg, size, flags=flags,
-                                    borderMode=cv2.BORDER_REFLECT)
+        if _reads_inside(image_to_pad, size, shot.pad_texture.shape):
+            # The pad covers the whole region: its warp writes every pixel, so no ground is drawn under it
+            # (a tracking window on a marker at close range).
+            frame = np.empty((size[1], size[0]), dtype=np.uint8)
+        else:
+            self._ground.ensure_read_by(image_to_bg, size)
+            frame = cv2.warpPerspective(self._ground.pixels, image_to_bg, size, flags=flags,
+                                        borderMode=cv2.BORDER_REFLECT)
         # BORDER_TRANSPARENT leaves the background wherever the pad texture does not reach.
         cv2.warpPerspective(shot.pad_texture, image_to_pad, size, dst=frame, flags=flags,
                             borderMode=cv2.BORDER_TRANSPARENT)
@@ -398,6 +403,26 @@ def _rounded_normal_levels(sigma: float) -> np.ndarray:
     table = levels[np.minimum(index, len(levels) - 1)].astype(np.int16)
     table.flags.writeable = False
     return table
+
+
+def _reads_inside(image_to_texture: np.ndarray, size_px: tuple[int, int], texture_shape) -> bool:
+    """Whether a bilinear inverse-map warp of `size_px` (width, height) output pixels reads only texels
+    inside the texture, two pixels clear of its edge (the taps reach floor(x) + 1, and OpenCV rounds the
+    coordinates to 1/32 px): then BORDER_TRANSPARENT leaves no pixel unwritten. The output's corners
+    decide it: a projective map in front of the camera sends the rectangle to a convex quadrilateral."""
+    width, height = size_px
+    right, bottom = width - 1.0, height - 1.0
+    h = image_to_texture.tolist()
+    rows, cols = texture_shape[:2]
+    for x, y in ((0.0, 0.0), (right, 0.0), (0.0, bottom), (right, bottom)):
+        depth = h[2][0] * x + h[2][1] * y + h[2][2]
+        if depth <= 1e-9:
+            return False
+        u = (h[0][0] * x + h[0][1] * y + h[0][2]) / depth
+        v = (h[1][0] * x + h[1][1] * y + h[1][2]) / depth
+        if not (2.0 <= u <= cols - 3.0 and 2.0 <= v <= rows - 3.0):
+            return False
+    return True
 
 
 def _pad_outline_m(pad: PadSpec) -> np.ndarray:
