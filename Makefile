@@ -28,6 +28,8 @@ bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/sim_speed.py
 	$(VENV)/bin/python benchmarks/vision_speed.py
 	$(VENV)/bin/python benchmarks/loop_speed.py
+	$(VENV)/bin/python benchmarks/speed_budget.py
+	$(VENV)/bin/python benchmarks/detector_variants.py
 	$(VENV)/bin/python benchmarks/face_speed.py
 	$(VENV)/bin/python benchmarks/campaign_wall_time.py
 	$(VENV)/bin/python benchmarks/executor_overhead.py

@@ -33,6 +33,13 @@ CASES = {
                      "expected a list of 2 values"),
     "unknown_param": (GOOD + "params:\n  LAND_SPEEED: 30\n", "params.LAND_SPEEED", "unknown autopilot parameter"),
     "top_level_list": ("- 1\n- 2\n", "", "expected a mapping at the top level"),
+    "misspelt_detector_parameter": (GOOD + "sensors:\n  marker:\n    detector: {adaptivethreshwinsizemax: 13}\n",
+                                    "sensors.marker.detector.adaptivethreshwinsizemax",
+                                    "did you mean adaptiveThreshWinSizeMax?"),
+    "detector_parameter_type": (GOOD + "sensors:\n  marker:\n    detector: {useAruco3Detection: 1}\n",
+                                "sensors.marker.detector.useAruco3Detection", "expected true or false"),
+    "detector_refused_by_opencv": (GOOD + "sensors:\n  marker:\n    detector: {adaptiveThreshWinSizeStep: 0}\n",
+                                   "sensors.marker.detector", "OpenCV refuses them"),
 }
 
 

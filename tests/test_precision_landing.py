@@ -1,9 +1,11 @@
 """Precision land modes end to end, and the onboard precision landing fed through the Vehicle protocol."""
 
 import math
+from dataclasses import replace
 
 import pytest
 
+from preland_app.sensing.spec import MarkerSensorSpec
 
 from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
@@ -22,6 +24,18 @@ def test_precision_modes_land_on_the_pad(thesis_mission, mode):
         assert outcome.details["landing_targets_sent"] > 100
     expected_altitude = 6.0 if mode == "marker" else 10.0
     assert outcome.takeoff_altitude_rel_m == expected_altitude
+
+
+def test_the_missions_detector_parameters_reach_the_companions_detector(thesis_mission):
+    # OpenCV's maxMarkerPerimeterRate 0.3: nothing over 192 px round (the 60 cm marker below about 6 m) is a
+    # candidate, so the marker is lost over the middle of the descent until the 9 cm one comes into view.
+    limited = replace(thesis_mission, sensors=replace(
+        thesis_mission.sensors, marker=MarkerSensorSpec(detector={"maxMarkerPerimeterRate": 0.3})))
+    default = run_trial(TrialRequest(mission=thesis_mission, seed=1, land_mode="marker", record_trajectory=False))
+    narrowed = run_trial(TrialRequest(mission=limited, seed=1, land_mode="marker", record_trajectory=False))
+    assert default.details["landing_targets_sent"] > 250
+    assert narrowed.details["landing_targets_sent"] < 0.8 * default.details["landing_targets_sent"]
+    assert narrowed.landing_error_cm > 3 * default.landing_error_cm
 
 
 def test_fused_mode_uses_both_sensors_and_averages_when_both_are_new(thesis_mission):

@@ -101,10 +101,10 @@ class _ComparingDetector:
     """The runtime's detector during a flight, checked frame by frame against the whole-frame paths: the
     same tracker on the whole drawn frame, and a plain MarkerDetector on the whole frame."""
 
-    def __init__(self, *, pad, camera):
-        self.window = TrackingMarkerDetector(pad=pad, camera=camera)
-        self.whole = TrackingMarkerDetector(pad=pad, camera=camera)
-        self.plain = MarkerDetector(pad=pad, camera=camera)
+    def __init__(self, *, pad, camera, parameters=None):
+        self.window = TrackingMarkerDetector(pad=pad, camera=camera, parameters=parameters)
+        self.whole = TrackingMarkerDetector(pad=pad, camera=camera, parameters=parameters)
+        self.plain = MarkerDetector(pad=pad, camera=camera, parameters=parameters)
         self.pad, self.camera = pad, camera
         self.frames = self.windowed = 0
         self.id_mismatches: list[tuple[int, list[int], list[int]]] = []
@@ -137,22 +137,30 @@ class _ComparingDetector:
         errors.extend(float(np.abs(a[k] - b[k]).max()) for k in a)
 
 
-@pytest.mark.parametrize("mission_file, land, seed", [
-    ("thesis_square_land.yaml", "marker", 11),
-    ("paper_marker_land.yaml", "paper_adaptive", 4),
-])
-def test_window_detections_match_the_whole_frame_over_a_flown_descent(monkeypatch, mission_file, land, seed):
+@pytest.mark.parametrize("mission_file, land, seed, settings", [
+    ("thesis_square_land.yaml", "marker", 11, {}),
+    ("paper_marker_land.yaml", "paper_adaptive", 4, {}),
+    # A mission's own detector settings (sensors.marker.detector) go to all three paths alike.
+    ("thesis_square_land.yaml", "marker", 11, {"adaptiveThreshWinSizeMax": 13}),
+], ids=["thesis-marker", "paper-adaptive", "thesis-marker-two-thresholds"])
+def test_window_detections_match_the_whole_frame_over_a_flown_descent(monkeypatch, mission_file, land, seed,
+                                                                      settings):
     detectors = []
 
-    def comparing(*, pad, camera):
-        detectors.append(_ComparingDetector(pad=pad, camera=camera))
+    def comparing(*, pad, camera, parameters=None):
+        detectors.append(_ComparingDetector(pad=pad, camera=camera, parameters=parameters))
         return detectors[-1]
 
     monkeypatch.setattr(embedded, "TrackingMarkerDetector", comparing)
     mission = load_mission(ROOT / "missions" / mission_file)
+    if settings:
+        mission = replace(mission, sensors=replace(mission.sensors, marker=replace(mission.sensors.marker,
+                                                                                   detector=settings)))
     outcome = run_trial(TrialRequest(mission=mission, seed=seed, land_mode=land, record_trajectory=False))
     assert outcome.outcome.value == "landed"
     (detector,) = detectors
+    assert detector.window.detector.getDetectorParameters().adaptiveThreshWinSizeMax == (
+        settings.get("adaptiveThreshWinSizeMax", 23))
     assert detector.frames > 200
     assert detector.window.window_hits > 0.5 * detector.frames  # most frames drew only the window
     assert detector.id_mismatches == []

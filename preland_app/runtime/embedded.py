@@ -18,7 +18,7 @@ from ..sim.noise import child_rng
 from ..sim.simulator import Simulator
 from ..vehicle.sim_backend import SimVehicle
 from ..sensing.irlock import IrLockModel
-from ..sensing.marker import TrackingMarkerDetector
+from ..sensing.marker import TrackingMarkerDetector, detector_parameters
 from ..sensing.sources import IrLockSource, VirtualFrameSource
 from ..sensing.suite import SensorSuite
 from ..sensing.virtual_camera import CameraPose, VirtualCamera
@@ -111,7 +111,8 @@ def build_sensor_suite(*, mission: MissionSpec, seed: int, true_pose: Callable[[
         renderer = VirtualCamera(camera=model, pad=pad, pad_origin_ned_m=pad_origin, pad_yaw_deg=mission.pad.yaw_deg,
                                  rng=child_rng(seed, "camera"), effects=spec.camera.effects())
         suite.camera = VirtualFrameSource(renderer=renderer, pose=true_pose, clock=clock, pose_time_s=pose_time_s)
-        suite.marker_detector = TrackingMarkerDetector(pad=pad, camera=model)
+        suite.marker_detector = TrackingMarkerDetector(pad=pad, camera=model,
+                                                       parameters=detector_parameters(spec.marker.detector))
     if irlock and pad.beacon_m is not None:
         yaw = math.radians(mission.pad.yaw_deg)
         bn, be = pad.beacon_m

@@ -21,7 +21,7 @@ from ..field.preflight import PreflightFailed, run_preflight
 from ..landing.base import ScoringReference
 from ..landing.precision import PrecisionLanding
 from ..sensing.logging import LoggingDetector, RecordingFrameSource
-from ..sensing.marker import TrackingMarkerDetector
+from ..sensing.marker import TrackingMarkerDetector, detector_parameters
 from ..mavlink.fault_message import listen
 from ..sensing.faults import FaultCommand
 from ..mission import MissionRunner
@@ -105,7 +105,9 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
                                  camera=strategy.uses_marker and real_camera is None, irlock=strategy.uses_irlock)
     if real_camera is not None:
         sensors.camera = real_camera
-        sensors.marker_detector = TrackingMarkerDetector(pad=mission.pad_spec(), camera=real_camera.camera)
+        sensors.marker_detector = TrackingMarkerDetector(
+            pad=mission.pad_spec(), camera=real_camera.camera,
+            parameters=detector_parameters(mission.sensors.marker.detector))
     kept = []
     if sensors.camera is not None and video_path:
         sensors.camera = RecordingFrameSource(source=sensors.camera, path=video_path)

@@ -44,10 +44,60 @@ class MarkerDetection:
         return angles_from_camera_point(float(x), float(y), float(z))
 
 
-def detector_parameters() -> cv2.aruco.DetectorParameters:
-    """OpenCV's defaults plus sub-pixel corner refinement (the angles need it)."""
+def _parameter_kinds() -> dict[str, type]:
+    defaults = cv2.aruco.DetectorParameters()
+    return {name: type(getattr(defaults, name)) for name in dir(defaults)
+            if not name.startswith("_") and not callable(getattr(defaults, name))}
+
+
+_CORNER_REFINE_METHODS = {cv2.aruco.CORNER_REFINE_NONE, cv2.aruco.CORNER_REFINE_SUBPIX, cv2.aruco.CORNER_REFINE_CONTOUR,
+                          cv2.aruco.CORNER_REFINE_APRILTAG}
+# Every settable field of OpenCV's DetectorParameters, by its type there (bool, int or float).
+DETECTOR_PARAMETER_KINDS: dict[str, type] = _parameter_kinds()
+
+
+def detector_parameter_problem(name: str, value: object) -> str | None:
+    """Why `value` cannot be OpenCV ArUco detector parameter `name`, or None when it can."""
+    kind = DETECTOR_PARAMETER_KINDS.get(name)
+    if kind is None:
+        close = [known for known in DETECTOR_PARAMETER_KINDS if known.lower() == name.lower()]
+        hint = f" (did you mean {close[0]}?)" if close else " (see cv2.aruco.DetectorParameters)"
+        return f"not an OpenCV ArUco detector parameter{hint}"
+    if kind is bool:
+        return None if isinstance(value, bool) else f"expected true or false, got {value!r}"
+    if kind is int:
+        if not isinstance(value, int) or isinstance(value, bool):
+            return f"expected an integer, got {value!r}"
+        if name == "cornerRefinementMethod" and value not in _CORNER_REFINE_METHODS:
+            return f"expected one of {sorted(_CORNER_REFINE_METHODS)} (cv2.aruco.CORNER_REFINE_*), got {value!r}"
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return f"expected a number, got {value!r}"
+    return None
+
+
+def detector_parameters_problem(overrides: dict[str, object]) -> str | None:
+    """Why OpenCV refuses these parameters together (its detector run once on a blank image), or None."""
+    try:
+        parameters = detector_parameters(overrides)
+        cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50), parameters).detectMarkers(
+            np.full((64, 64), 128, dtype=np.uint8))
+    except (ValueError, cv2.error) as error:
+        text = " ".join(str(error).split())
+        return f"OpenCV refuses them: {text.split(' error: ', 1)[-1]}"
+    return None
+
+
+def detector_parameters(overrides: dict[str, object] | None = None) -> cv2.aruco.DetectorParameters:
+    """OpenCV's defaults plus sub-pixel corner refinement (the angles need it), then `overrides` (OpenCV's
+    names, checked by `detector_parameter_problem`)."""
     parameters = cv2.aruco.DetectorParameters()
     parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    for name, value in (overrides or {}).items():
+        problem = detector_parameter_problem(name, value)
+        if problem is not None:
+            raise ValueError(f"{name}: {problem}")
+        setattr(parameters, name, value)
     return parameters
 
 

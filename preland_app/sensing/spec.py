@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from ..errors import require
 from .camera import RPI_CAMERA_V2_640X480, CameraModel, load_calibration
 from .fusion import FusionSpec
 from .irlock import IrLockSpec
+from .marker import DETECTOR_PARAMETER_KINDS, detector_parameter_problem, detector_parameters_problem
 from .virtual_camera import ImageEffects
 
 
@@ -50,12 +52,23 @@ class CameraSpec:
 class MarkerSensorSpec:
     """Marker processing on the companion: `processing_latency_s` from capture to reading
     (thesis: about 50 ms on a Raspberry Pi). Frames are processed one at a time, so the
-    reading rate is the frame rate divided by the frames each one takes (15 Hz at 30 fps)."""
+    reading rate is the frame rate divided by the frames each one takes (15 Hz at 30 fps).
+    `detector`: OpenCV ArUco detector parameters by OpenCV's names (cv2.aruco.DetectorParameters),
+    over its defaults with sub-pixel corners; empty, the thesis' detector."""
 
     processing_latency_s: float = 0.05
+    # Hashed only when set (config/mission.py's HASH_WHEN_SET), so stored campaigns still resume.
+    detector: dict[str, Any] = field(default_factory=dict, metadata={
+        "hash": "when-set", "schema": {"propertyNames": {"enum": sorted(DETECTOR_PARAMETER_KINDS)}}})
 
     def __post_init__(self) -> None:
         require(0 <= self.processing_latency_s <= 2.0, "processing_latency_s", "must be within 0..2 s")
+        for name, value in self.detector.items():
+            problem = detector_parameter_problem(name, value)
+            require(problem is None, f"detector.{name}", problem or "")
+        if self.detector:
+            problem = detector_parameters_problem(self.detector)
+            require(problem is None, "detector", problem or "")
 
 
 @dataclass(frozen=True)
