@@ -58,7 +58,7 @@ def _fly(jobs, paper_mission, paper_trials: int, detector: dict) -> tuple[float,
     for job in jobs:
         record = run_job(replace(job, mission=_with_detector(job.mission, detector)))
         flown += record.result.get("flight_time_s") or 0.0
-        results.setdefault(f"{job.campaign[7:]} {job.scenario}", []).append(
+        results.setdefault(f"{job.campaign.removeprefix('thesis_')} {job.scenario}", []).append(
             (record.result.get("outcome"), record.result.get("landing_error_cm")))
     mission = _with_detector(paper_mission, detector)
     for seed in range(paper_trials):

@@ -57,26 +57,15 @@ class GrassTexture:
     def ensure_read_by(self, image_to_texture: np.ndarray, size_px: tuple[int, int]) -> None:
         """Draw every tile that a bilinear `cv2.warpPerspective` (inverse map `image_to_texture`, output
         `size_px` = (width, height), BORDER_REFLECT) reads."""
-        width, height = size_px
-        corners = np.array([[0.0, 0.0, 1.0], [width - 1.0, 0.0, 1.0], [0.0, height - 1.0, 1.0],
-                            [width - 1.0, height - 1.0, 1.0]]).T
-        mapped = image_to_texture @ corners
-        depth = mapped[2]
         tiles = self._drawn.shape[0]
-        # A projective map sends the output's edges to straight lines, so its corners bound what it reads,
-        # unless the horizon crosses it (a corner maps behind the camera): then draw everything.
-        if depth.min() <= 1e-9:
-            self._draw_tiles(0, tiles, 0, tiles)
-            return
-        u, v = mapped[0] / depth, mapped[1] / depth
-        # Bilinear taps reach floor(x) and floor(x) + 1; one more pixel for the warp's fixed-point rounding.
-        u0, u1 = math.floor(float(u.min())) - 2, math.floor(float(u.max())) + 3
-        v0, v1 = math.floor(float(v.min())) - 2, math.floor(float(v.max())) + 3
+        box = texels_read_by(image_to_texture, size_px)
         size = self.size_px
-        if u0 < 0 or v0 < 0 or u1 >= size or v1 >= size:
-            # Reflected about the field's edge: rare (the field reaches 40 m from the pad); draw everything.
+        if box is None or box[0] < 0 or box[1] < 0 or box[2] >= size or box[3] >= size:
+            # The horizon crosses the output, or the warp reflects about the field's edge (rare: the field
+            # reaches 40 m from the pad): draw everything.
             self._draw_tiles(0, tiles, 0, tiles)
             return
+        u0, v0, u1, v1 = box
         self._draw_tiles(v0 // TILE_PX, v1 // TILE_PX + 1, u0 // TILE_PX, u1 // TILE_PX + 1)
 
     def _draw_tiles(self, row0: int, row1: int, col0: int, col1: int) -> None:
@@ -99,3 +88,22 @@ class GrassTexture:
         np.clip(tile, *_GREY_RANGE, out=tile)
         self.pixels[y0:y0 + TILE_PX, x0:x0 + TILE_PX] = tile.astype(np.uint8)
         self._drawn[row, col] = True
+
+
+def texels_read_by(image_to_texture: np.ndarray, size_px: tuple[int, int]) -> tuple[int, int, int, int] | None:
+    """The texels (u0, v0, u1, v1; columns and rows, inclusive) that a bilinear inverse-map
+    `cv2.warpPerspective` of `size_px` (width, height) output pixels can read: the taps reach floor(x) and
+    floor(x) + 1, and one more pixel each way covers the warp's fixed-point rounding. None when the horizon
+    crosses the output (a corner maps behind the camera). A projective map in front of the camera sends the
+    output's edges to straight lines, so its four corners bound the rest."""
+    width, height = size_px
+    right, bottom = width - 1.0, height - 1.0
+    h = image_to_texture.tolist()
+    us, vs = [], []
+    for x, y in ((0.0, 0.0), (right, 0.0), (0.0, bottom), (right, bottom)):
+        depth = h[2][0] * x + h[2][1] * y + h[2][2]
+        if depth <= 1e-9:
+            return None
+        us.append((h[0][0] * x + h[0][1] * y + h[0][2]) / depth)
+        vs.append((h[1][0] * x + h[1][1] * y + h[1][2]) / depth)
+    return (math.floor(min(us)) - 2, math.floor(min(vs)) - 2, math.floor(max(us)) + 3, math.floor(max(vs)) + 3)

@@ -76,8 +76,8 @@ def detector_parameter_problem(name: str, value: object) -> str | None:
     return None
 
 
-def detector_parameters_problem(overrides: dict[str, object]) -> str | None:
-    """Why OpenCV refuses these parameters together (its detector run once on a blank image), or None."""
+def opencv_refusal(overrides: dict[str, object]) -> str | None:
+    """Why OpenCV refuses these detector parameters together (its detector run once on a blank image), or None."""
     try:
         parameters = detector_parameters(overrides)
         cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50), parameters).detectMarkers(

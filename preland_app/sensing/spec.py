@@ -10,7 +10,7 @@ from ..errors import require
 from .camera import RPI_CAMERA_V2_640X480, CameraModel, load_calibration
 from .fusion import FusionSpec
 from .irlock import IrLockSpec
-from .marker import DETECTOR_PARAMETER_KINDS, detector_parameter_problem, detector_parameters_problem
+from .marker import DETECTOR_PARAMETER_KINDS, detector_parameter_problem, opencv_refusal
 from .virtual_camera import ImageEffects
 
 
@@ -67,7 +67,7 @@ class MarkerSensorSpec:
             problem = detector_parameter_problem(name, value)
             require(problem is None, f"detector.{name}", problem or "")
         if self.detector:
-            problem = detector_parameters_problem(self.detector)
+            problem = opencv_refusal(self.detector)
             require(problem is None, "detector", problem or "")
 
 

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from .camera import R_CAM_FROM_BODY, CameraModel
-from .ground_texture import FIELD_EXTENT_M, FIELD_PX_PER_M, GrassTexture
+from .ground_texture import FIELD_EXTENT_M, FIELD_PX_PER_M, GrassTexture, texels_read_by
 from .pad import PadSpec, render_pad_texture
 
 _PAD_MAX_PX_PER_M = 1600.0
@@ -319,9 +319,11 @@ class VirtualCamera:
             shift = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
             image_to_bg, image_to_pad = image_to_bg @ shift, image_to_pad @ shift
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-        if _reads_inside(image_to_pad, size, shot.pad_texture.shape):
-            # The pad covers the whole region: its warp writes every pixel, so no ground is drawn under it
-            # (a tracking window on a marker at close range).
+        rows, cols = shot.pad_texture.shape[:2]
+        pad_box = texels_read_by(image_to_pad, size)
+        if pad_box is not None and pad_box[0] >= 0 and pad_box[1] >= 0 and pad_box[2] < cols and pad_box[3] < rows:
+            # Every pixel reads the pad's texture: BORDER_TRANSPARENT then leaves none unwritten, so no ground
+            # is drawn under it (a tracking window on a marker at close range).
             frame = np.empty((size[1], size[0]), dtype=np.uint8)
         else:
             self._ground.ensure_read_by(image_to_bg, size)
@@ -403,26 +405,6 @@ def _rounded_normal_levels(sigma: float) -> np.ndarray:
     table = levels[np.minimum(index, len(levels) - 1)].astype(np.int16)
     table.flags.writeable = False
     return table
-
-
-def _reads_inside(image_to_texture: np.ndarray, size_px: tuple[int, int], texture_shape) -> bool:
-    """Whether a bilinear inverse-map warp of `size_px` (width, height) output pixels reads only texels
-    inside the texture, two pixels clear of its edge (the taps reach floor(x) + 1, and OpenCV rounds the
-    coordinates to 1/32 px): then BORDER_TRANSPARENT leaves no pixel unwritten. The output's corners
-    decide it: a projective map in front of the camera sends the rectangle to a convex quadrilateral."""
-    width, height = size_px
-    right, bottom = width - 1.0, height - 1.0
-    h = image_to_texture.tolist()
-    rows, cols = texture_shape[:2]
-    for x, y in ((0.0, 0.0), (right, 0.0), (0.0, bottom), (right, bottom)):
-        depth = h[2][0] * x + h[2][1] * y + h[2][2]
-        if depth <= 1e-9:
-            return False
-        u = (h[0][0] * x + h[0][1] * y + h[0][2]) / depth
-        v = (h[1][0] * x + h[1][1] * y + h[1][2]) / depth
-        if not (2.0 <= u <= cols - 3.0 and 2.0 <= v <= rows - 3.0):
-            return False
-    return True
 
 
 def _pad_outline_m(pad: PadSpec) -> np.ndarray:
