@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: campaign fly test bench clean
+.PHONY: campaign fly test docs bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,23 +24,28 @@ fly: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -n 4 --dist loadgroup
 
+# Builds the docs site into site/ (strict: a broken link or a missing page fails).
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict --site-dir site
+
 bench: $(STAMP)
-	$(VENV)/bin/python benchmarks/sim_speed.py
-	$(VENV)/bin/python benchmarks/vision_speed.py
-	$(VENV)/bin/python benchmarks/loop_speed.py
-	$(VENV)/bin/python benchmarks/speed_budget.py
-	$(VENV)/bin/python benchmarks/detector_variants.py
-	$(VENV)/bin/python benchmarks/face_speed.py
-	$(VENV)/bin/python benchmarks/campaign_wall_time.py
-	$(VENV)/bin/python benchmarks/executor_overhead.py
-	$(VENV)/bin/python benchmarks/store_growth.py
-	$(VENV)/bin/python benchmarks/normal_landing_table.py
-	$(VENV)/bin/python benchmarks/land_modes_table.py
-	$(VENV)/bin/python benchmarks/fault_scenarios_table.py
-	$(VENV)/bin/python benchmarks/drop_rate_sensitivity.py
-	$(VENV)/bin/python benchmarks/paper_table.py
-	@if [ -n "$$PRELAND_SITL_BINARY" ]; then $(VENV)/bin/python benchmarks/sitl_vs_embedded.py; \
+	$(VENV)/bin/python benchmarks/record.py sim_speed.py
+	$(VENV)/bin/python benchmarks/record.py vision_speed.py
+	$(VENV)/bin/python benchmarks/record.py loop_speed.py
+	$(VENV)/bin/python benchmarks/record.py speed_budget.py
+	$(VENV)/bin/python benchmarks/record.py detector_variants.py
+	$(VENV)/bin/python benchmarks/record.py face_speed.py
+	$(VENV)/bin/python benchmarks/record.py campaign_wall_time.py
+	$(VENV)/bin/python benchmarks/record.py executor_overhead.py
+	$(VENV)/bin/python benchmarks/record.py store_growth.py
+	$(VENV)/bin/python benchmarks/record.py normal_landing_table.py
+	$(VENV)/bin/python benchmarks/record.py land_modes_table.py
+	$(VENV)/bin/python benchmarks/record.py fault_scenarios_table.py
+	$(VENV)/bin/python benchmarks/record.py drop_rate_sensitivity.py
+	$(VENV)/bin/python benchmarks/record.py error_budget.py
+	$(VENV)/bin/python benchmarks/record.py paper_table.py
+	@if [ -n "$$PRELAND_SITL_BINARY" ]; then $(VENV)/bin/python benchmarks/record.py sitl_vs_embedded.py; \
 	else echo "benchmarks/sitl_vs_embedded.py skipped: set PRELAND_SITL_BINARY to an arducopter SITL binary"; fi
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build site *.egg-info

@@ -6,9 +6,11 @@ the others' draws as they were). A source's contribution is the all-on mean minu
 (cm; negative: the source happens to help on these seeds). The last rows fly with every source off, and
 the seed-to-seed spread of the all-on mean. Each row names where the source's magnitude comes from.
 
+Where each source's magnitude comes from is in `preland_app/sim/error_sources.py` (the docs' error-source
+reference is generated from it).
+
 Usage: python benchmarks/error_budget.py [--seeds N] [--workers W] [--only LABEL,...] [--out FILE]
-(`--out` also writes the printed table to FILE, which `benchmarks/update_readme.py --budget FILE` puts
-into the README.)
+(`--out` also writes the printed table to FILE.)
 Default: 4 seeds of 3 scenarios (a few minutes on 2 cores); use --seeds 20 for figures to quote.
 """
 
@@ -31,79 +33,30 @@ from fault_scenarios_table import CALM, GUSTY, SCENARIOS  # noqa: E402
 
 from preland_app.config.mission import MissionSpec, load_mission  # noqa: E402
 from preland_app.runtime.embedded import TrialRequest, run_trial  # noqa: E402
+from preland_app.sim.error_sources import ERROR_SOURCES, switched_off  # noqa: E402
 
 DEFAULT_SCENARIOS = ("T3 irlock", "T3 irlock below3", "T5 default")
 
 
-def _nav(**fields):
-    return lambda m: replace(m, environment=replace(m.environment,
-                                                    navigation=replace(m.environment.navigation, **fields)))
+# Every source the mission switches on by default (the rotor wash is off unless a profile sets it).
+SOURCES = {source.name: source for source in ERROR_SOURCES if source.defaults() != source.off}
 
 
-def _wind(**fields):
-    return lambda m: replace(m, environment=replace(m.environment, wind=replace(m.environment.wind, **fields)))
-
-
-def _irlock(**fields):
-    return lambda m: replace(m, sensors=replace(m.sensors, irlock=replace(m.sensors.irlock, **fields)))
-
-
-def _camera(**fields):
-    return lambda m: replace(m, sensors=replace(m.sensors, camera=replace(m.sensors.camera, **fields)))
-
-
-def _marker(**fields):
-    return lambda m: replace(m, sensors=replace(m.sensors, marker=replace(m.sensors.marker, **fields)))
-
-
-def _both(*changes):
-    def apply(mission: MissionSpec) -> MissionSpec:
-        for change in changes:
-            mission = change(mission)
-        return mission
-    return apply
-
-
-# name: (how to switch it off, where its magnitude comes from)
-SOURCES = {
-    "GPS drift + noise": (_nav(gps_drift_sigma_m=0.0, position_noise_sigma_m=0.0),
-                          "fitted to the thesis' normal landings (README)"),
-    "baro drift + noise": (_nav(baro_drift_sigma_m=0.0, baro_noise_sigma_m=0.0), "unsourced: calibratable"),
-    "velocity noise": (_nav(velocity_noise_sigma_m_s=0.0), "unsourced: calibratable"),
-    "rangefinder noise": (_nav(rangefinder_noise_sigma_m=0.0), "unsourced: calibratable"),
-    "attitude error": (_nav(attitude_noise_sigma_deg=0.0), "unsourced: calibratable"),
-    "IMU accel noise": (_nav(imu_accel_noise_m_s2=0.0), "unsourced: calibratable"),
-    "heading error": (_nav(heading_error_sigma_deg=0.0), "HMC5883L datasheet: 1-2 deg heading accuracy"),
-    "steady wind": (_wind(speed_m_s=0.0), "thesis: calm (T3), gusts (T4/T5): speed calibratable"),
-    "gusts (Dryden)": (_wind(turbulence_w20_m_s=0.0), "MIL-F-8785C form; W20 calibratable"),
-    "IR-LOCK angle noise": (_irlock(noise_sigma_deg=0.0), "unsourced: calibratable"),
-    "IR-LOCK pixel grid": (_irlock(quantize=False), "Pixy 320x200 blocks; irlock driver 60x35 deg scale"),
-    "IR-LOCK frame age": (_irlock(latency_s=0.0), "Pixy: one 20 ms frame at 50 Hz"),
-    "camera image noise": (_camera(noise_sigma=0.0), "unsourced: calibratable"),
-    "companion processing": (_marker(processing_latency_s=0.0), "thesis: about 50 ms per frame on the Pi"),
-    "sensor mounting offset": (_both(_irlock(mount_offset_frd_m=(0.0, 0.0, 0.0)),
-                                     _camera(mount_offset_frd_m=(0.0, 0.0, 0.0))),
-                               "thesis Fig. 14b + board sizes: 12.5 / 27 mm"),
-}
-
-
-def _mission(label: str, switched_off: tuple[str, ...]) -> MissionSpec:
+def _mission(label: str, off: tuple[str, ...]) -> MissionSpec:
     mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
     wind = CALM if label.startswith("T3") else GUSTY
     mission = replace(mission, environment=replace(mission.environment, wind=replace(mission.environment.wind,
                                                                                      **wind)))
-    for name in switched_off:
-        mission = SOURCES[name][0](mission)
-    return mission
+    return switched_off(mission, *(SOURCES[name] for name in off))
 
 
 def _one(job: tuple[str, tuple[str, ...], int]) -> tuple[str, tuple[str, ...], int, float | None]:
-    label, switched_off, seed = job
+    label, off, seed = job
     mode, sensor, faults, height, *_ = SCENARIOS[label]
-    outcome = run_trial(TrialRequest(mission=_mission(label, switched_off), seed=seed, land_mode=mode,
+    outcome = run_trial(TrialRequest(mission=_mission(label, off), seed=seed, land_mode=mode,
                                      sensor=sensor, faults=faults, takeoff_altitude_rel_m=float(height),
                                      record_trajectory=False))
-    return label, switched_off, seed, outcome.landing_error_cm
+    return label, off, seed, outcome.landing_error_cm
 
 
 def main() -> None:
@@ -144,13 +97,12 @@ def budget_lines(results: list[tuple], labels: list[str], seeds: int) -> list[st
     short = {label: label.replace("T3 ", "").replace("T5 ", "T5 ")[:12] for label in labels}
     add(f"error budget: contribution of each source to the mean landing error (cm), {seeds} seeds, "
           f"all-on mean minus the mean with that source off")
-    header = f"{'source':<24}" + "".join(f"{short[label]:>13}" for label in labels) + f"{'mean':>8}   magnitude from"
+    header = f"{'source':<24}" + "".join(f"{short[label]:>13}" for label in labels) + f"{'mean':>8}"
     add(header)
     all_on = {label: mean(label, ()) for label in labels}
-    for name, (_, provenance) in SOURCES.items():
+    for name in SOURCES:
         row = [all_on[label] - mean(label, (name,)) for label in labels]
-        add(f"{name:<24}" + "".join(f"{value:>+13.1f}" for value in row) + f"{statistics.mean(row):>+8.1f}   "
-              f"{provenance}")
+        add(f"{name:<24}" + "".join(f"{value:>+13.1f}" for value in row) + f"{statistics.mean(row):>+8.1f}")
     add(f"{'all on (mean)':<24}" + "".join(f"{all_on[label]:>13.1f}" for label in labels))
     add(f"{'all off (mean)':<24}" + "".join(f"{mean(label, tuple(SOURCES)):>13.1f}" for label in labels))
     spreads = []

@@ -56,7 +56,8 @@ def fly(mission: MissionSpec | str | os.PathLike, *, seed: int = 1, land: str | 
         truth: bool = True, record_trajectory: bool = True) -> TrialOutcome:
     """Fly one trial of `mission` (a MissionSpec or a mission file) and return its outcome.
 
-    Runtime: the embedded simulator (default; virtual time, several hundred times faster than real time),
+    Runtime: the embedded simulator (default; virtual time, much faster than real time: hundreds of
+    times without a camera, tens of times with one),
     `connect=URL` (MAVLink: `udpout://127.0.0.1:14550` for `preland sim serve`, a real drone; `truth=False`
     when it reports no ground truth), or `sitl=PATH` (a fresh ArduPilot SITL `arducopter` process at
     `sitl_speedup`; None: 2 for land modes that read camera frames, 10 for the others). `land`: a land mode by name or import path `package.module:ClassName`, overriding the

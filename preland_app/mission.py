@@ -181,9 +181,22 @@ class MissionRunner:
 
         self._landing = True
         report.landing = await self._land()
+        await self._wait_disarmed()
         report.disarmed_time_s = clock.now_s()
         report.completed = True
         return report
+
+    async def _wait_disarmed(self) -> None:
+        """A land mode may return while the autopilot is still landing (it handed over to LAND, say): the
+        trial has landed only once the vehicle is disarmed, within what is left of the land timeout."""
+        clock = self.clock
+        left_s = self.spec.timeouts.land_s - (clock.now_s() - (self.report.handover_time_s or clock.now_s()))
+
+        async def disarmed() -> bool:
+            return not (await self._telemetry()).armed
+
+        await wait_until(disarmed, clock=clock, timeout_s=max(left_s, 0.0), operation="land",
+                         poll_period_s=POLL_PERIOD_S, describe=self._describe)
 
     async def _land(self) -> LandingReport:
         """Hand over to the land mode, with the mission's land timeout. Its own errors (not the vehicle's)

@@ -1,4 +1,4 @@
-"""JSON Schemas of mission, campaign and pad files: generated from the specs, shipped, and strict."""
+"""JSON Schemas of mission, campaign, pad and profile files: generated from the specs, shipped, and strict."""
 
 import copy
 import json
@@ -16,7 +16,8 @@ from .conftest import ROOT
 
 SHIPPED = {"mission": sorted((ROOT / "missions").glob("*.yaml")),
            "campaign": sorted((ROOT / "campaigns").glob("*.yaml")),
-           "pad": sorted((ROOT / "pads").glob("*.yaml")) if (ROOT / "pads").is_dir() else []}
+           "pad": sorted((ROOT / "pads").glob("*.yaml")) if (ROOT / "pads").is_dir() else [],
+           "profile": sorted((ROOT / "profiles").glob("*.yaml"))}
 
 
 def command_schema(kind: str) -> str:

@@ -1,4 +1,4 @@
-"""JSON Schemas of mission, campaign and pad files, generated from the spec dataclasses.
+"""JSON Schemas of mission, campaign, pad and profile files, generated from the spec dataclasses.
 
 The schema walks the frozen dataclasses' fields and type hints, as the loader
 does, so the two cannot disagree on structure: every mapping is closed
@@ -28,12 +28,13 @@ _PRIMITIVES = {bool: "boolean", int: "integer", float: "number", str: "string"}
 def _spec_classes() -> dict[str, type]:
     from ..campaign.spec import CampaignSpec
     from ..sensing.pad import PadSpec
+    from ..sim.profile import ProfileSpec
     from .mission import MissionSpec
 
-    return {"mission": MissionSpec, "campaign": CampaignSpec, "pad": PadSpec}
+    return {"mission": MissionSpec, "campaign": CampaignSpec, "pad": PadSpec, "profile": ProfileSpec}
 
 
-SCHEMA_KINDS = ("mission", "campaign", "pad")
+SCHEMA_KINDS = ("mission", "campaign", "pad", "profile")
 
 
 def _description(cls: type) -> str:
@@ -141,7 +142,7 @@ def _json_default(value: Any) -> Any:
 
 
 def json_schema(kind: str) -> dict[str, Any]:
-    """The JSON Schema of a `kind` file (mission, campaign, pad); KeyError for another kind."""
+    """The JSON Schema of a `kind` file (mission, campaign, pad, profile); KeyError for another kind."""
     cls = _spec_classes()[kind]
     builder = _Builder()
     root = builder.object(cls, partial=False)

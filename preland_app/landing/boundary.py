@@ -9,7 +9,7 @@ a Simulator, a vehicle backend, or the functions that give the virtual sensors
 the true pose: the vehicle view offers exactly the Vehicle protocol, the sensor
 views give images, detections and readings. (Python cannot wall off objects
 from code that goes looking for them, e.g. through `gc`; a land mode that does
-breaks the contract, see the README.)
+breaks the contract; see the docs, "Your own land mode".)
 
 For a plugin, the sensor views also apply the mission's faults (`land.faults`)
 to what they deliver; the built-in precision modes apply their own.

@@ -105,12 +105,13 @@ _BUILT_IN = (
         source="campaign files (thesis: 'practically ideal weather' for Table 3, 'regular wind gusts' for 4 and 5)"),
     CalibratableParameter(
         name="wind.turbulence_w20_m_s", low=0.0, high=10.0, unit="m/s",
-        source="MIL-F-8785C light turbulence (W20 = 15 knots is light); the campaign files' values have none"),
+        source="none: the form is MIL-F-8785C's, whose light turbulence is W20 = 15 kt (7.7 m/s); "
+               "the 2 m/s default and the campaign files' values have no source"),
     CalibratableParameter(
         # Bounded by half the rotors' induced velocity in hover (momentum theory: 5.7 m/s for a 2.5 kg
         # hexacopter on 10-inch propellers), the speed of the wash that recirculates.
         name="ground_effect.sigma_m_s", low=0.0, high=3.0, unit="m/s",
-        source="none: 0 (off); recirculating rotor wash below ground_effect.height_m (see README)"),
+        source="none: 0 (off); recirculating rotor wash below ground_effect.height_m (docs: error sources)"),
     CalibratableParameter(
         name="airframe.drag_per_s", low=0.1, high=1.0, unit="1/s",
         source="none: a linear drag typical of a 1.5 kg quadcopter"),

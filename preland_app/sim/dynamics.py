@@ -5,8 +5,8 @@ are folded into first-order responses: the lean angles follow their demand with
 time constant `attitude_tau_s`; the vertical acceleration follows the autopilot's
 demand (its z velocity loop, PSC_VELZ_P) with the thrust lag `thrust_tau_s`.
 Horizontal acceleration comes from the thrust tilt
-(g tan(lean)) and linear drag of the air-relative velocity. See README,
-"Simulator", for what this leaves out.
+(g tan(lean)) and linear drag of the air-relative velocity. The docs' "The error model" (explanation)
+says what this leaves out.
 """
 
 from __future__ import annotations

@@ -55,7 +55,7 @@ class _AxisFilter:
         self.position = position
         self.velocity = 0.0
         # Zero velocity with 1 (m/s)^2. AC_PrecLand (3.6/4.0) starts at minus the vehicle's velocity with
-        # 2^2: a departure that the README names.
+        # 2^2: a departure that the docs name (explanation, "Departures from the sources").
         self.p00, self.p01, self.p11 = variance, 0.0, 1.0
 
     def predict(self, dt_s: float, delta_velocity: float, delta_velocity_noise: float) -> None:

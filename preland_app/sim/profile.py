@@ -195,7 +195,8 @@ def _plain(value: Any) -> Any:
 
 def profile_yaml(profile: ProfileSpec) -> str:
     """The profile as YAML text (loadable by `load_profile`)."""
-    header = ("# A simulation profile (see README, 'Simulation profiles'): overrides of the simulated world,\n"
+    header = ("# yaml-language-server: $schema=../schemas/profile.schema.json\n"
+              "# A simulation profile (docs: reference/profile.md): overrides of the simulated world,\n"
               "# and, for a fitted one, the data it was fitted on and how it scores.\n")
     return header + yaml.safe_dump(_plain(profile), sort_keys=False, allow_unicode=True, width=110)
 

@@ -2,7 +2,7 @@
 
 Missions and campaigns override any of these fields by name (`environment:`
 in YAML); unknown names are rejected at load time. Defaults are chosen so that
-a GPS-only landing misses by what the sources report (see README, "Simulator").
+a GPS-only landing misses by what the sources report (docs: explanation, "The error model").
 """
 
 from __future__ import annotations
@@ -115,7 +115,7 @@ class NavigationSpec:
 
 @dataclass(frozen=True)
 class AirframeSpec:
-    """The multirotor's response, folded into first-order lags (see README).
+    """The multirotor's response, folded into first-order lags (docs: explanation, "The error model").
 
     `attitude_tau_s`: lean-angle response to a lean demand; `thrust_tau_s`:
     vertical-acceleration response to the autopilot's acceleration demand (motors and
