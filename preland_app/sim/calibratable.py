@@ -53,34 +53,34 @@ class CalibratableParameter:
         return self.low <= value <= self.high
 
 
-def _root_and_parts(name: str) -> tuple[type, list[str]]:
-    from ..sensing.spec import SensorsSpec
-    from .spec import EnvironmentSpec
-
-    if name.startswith(SENSORS_PREFIX):
-        return SensorsSpec, name[len(SENSORS_PREFIX):].split(".")
-    return EnvironmentSpec, name.split(".")
-
-
-def spec_default(name: str) -> Any:
-    """The default of the spec field at dotted path `name`; CalibratableError when there is no such number."""
-    cls, parts = _root_and_parts(name)
-    value: Any = cls()
-    for part in parts:
-        if not dataclasses.is_dataclass(value) or part not in {f.name for f in dataclasses.fields(value)}:
-            raise CalibratableError(f"{name}: no such field in the mission's "
-                                    f"{'sensors' if cls.__name__ == 'SensorsSpec' else 'environment'} section")
-        value = getattr(value, part)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise CalibratableError(f"{name}: not a number (only numbers can be calibrated)")
-    return value
-
-
 def section_and_path(name: str) -> tuple[str, list[str]]:
     """Which mission section (`environment` or `sensors`) and the key path inside it."""
     if name.startswith(SENSORS_PREFIX):
         return "sensors", name[len(SENSORS_PREFIX):].split(".")
     return "environment", name.split(".")
+
+
+def section_default(section: str, parts: list[str], *, name: str | None = None) -> Any:
+    """The default of the field at key path `parts` in a mission's `section` (environment or sensors), as a
+    mission gets it when nothing overrides it; CalibratableError (naming `name`) when there is no such field."""
+    from ..sensing.spec import SensorsSpec
+    from .spec import EnvironmentSpec
+
+    value: Any = {"environment": EnvironmentSpec, "sensors": SensorsSpec}[section]()
+    for part in parts:
+        if not dataclasses.is_dataclass(value) or part not in {f.name for f in dataclasses.fields(value)}:
+            raise CalibratableError(f"{name or '.'.join(parts)}: no such field in the mission's {section} section")
+        value = getattr(value, part)
+    return value
+
+
+def spec_default(name: str) -> Any:
+    """The default of the spec field at dotted path `name`; CalibratableError when there is no such number."""
+    section, parts = section_and_path(name)
+    value = section_default(section, parts, name=name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise CalibratableError(f"{name}: not a number (only numbers can be calibrated)")
+    return value
 
 
 _BUILT_IN = (

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import PrelandError
+from .calibratable import CalibratableError, section_default
 
 _SECTIONS = ("environment", "sensors")
 
@@ -93,16 +94,11 @@ def _split(path: str) -> tuple[str, list[str]]:
 
 def field_default(path: str) -> Any:
     """The default of the mission field at dotted `path` (e.g. `environment.wind.speed_m_s`)."""
-    from ..sensing.spec import SensorsSpec
-    from .spec import EnvironmentSpec
-
     section, parts = _split(path)
-    value: Any = EnvironmentSpec() if section == "environment" else SensorsSpec()
-    for part in parts:
-        if not dataclasses.is_dataclass(value) or part not in {f.name for f in dataclasses.fields(value)}:
-            raise ErrorSourceError(f"{path}: no such field")
-        value = getattr(value, part)
-    return value
+    try:
+        return section_default(section, parts, name=path)
+    except CalibratableError as error:
+        raise ErrorSourceError(str(error)) from None
 
 
 def _replaced(spec: Any, parts: list[str], value: Any) -> Any:
