@@ -21,8 +21,8 @@ from .test_field_records import seeded_store
 
 def test_metadata_gives_units_descriptions_and_canned_queries_that_run(tmp_path):
     db = seeded_store(tmp_path / "results.db")
-    assert CliRunner().invoke(app, ["trial", "record", "--db", str(db), "--campaign", "thesis_table3", "--scenario",
-                                    "IRLock / none", "--error-cm", "6"]).exit_code == 0
+    assert CliRunner().invoke(app, ["trial", "record", str(db), "thesis_table3", "IRLock / none",
+                                    "--error-cm", "6"]).exit_code == 0
     out = tmp_path / "metadata.json"
     result = CliRunner().invoke(app, ["campaign", "browse", str(db), "--metadata", str(out)])
     assert result.exit_code == 0, result.output
@@ -75,8 +75,8 @@ def _dom(chromium: str, url: str) -> str:
 @pytest.mark.skipif(_chromium() is None, reason="no Chromium on this machine (apt-get install chromium)")
 def test_the_datasette_page_lists_campaigns_and_runs_a_canned_query_in_headless_chromium(tmp_path):
     db = seeded_store(tmp_path / "results.db")
-    assert CliRunner().invoke(app, ["trial", "record", "--db", str(db), "--campaign", "field_day", "--scenario",
-                                    "hover", "--error-cm", "6", "--new"]).exit_code == 0
+    assert CliRunner().invoke(app, ["trial", "record", str(db), "field_day", "hover", "--error-cm", "6",
+                                    "--new"]).exit_code == 0
     port = _free_port()
     server = browse.start(db, tmp_path / "metadata.json", port=port)
     try:

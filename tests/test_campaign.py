@@ -243,7 +243,7 @@ def test_field_trials_sit_beside_simulated_ones_in_the_report(tmp_path):
         run_campaign(campaign, store, workers=1)
     runner = CliRunner()
     for error, x, y in ((12.5, 10.0, -7.5), (30.0, -20.0, 22.4)):
-        result = runner.invoke(app, ["trial", "record", "--db", str(db), "--campaign", "quick", "--scenario", "gps",
+        result = runner.invoke(app, ["trial", "record", str(db), "quick", "gps",
                                      "--error-cm", str(error), "--x-cm", str(x), "--y-cm", str(y)])
         assert result.exit_code == 0, result.output
     with ResultsStore(db) as store:
@@ -256,6 +256,6 @@ def test_field_trials_sit_beside_simulated_ones_in_the_report(tmp_path):
         assert run_campaign(campaign, store, workers=1, resume=True) == (0, 6)
     result = runner.invoke(app, ["campaign", "report", str(db), "--out", str(tmp_path / "rep")])
     assert result.exit_code == 0 and "| gps [field] |" in result.stdout
-    result = runner.invoke(app, ["trial", "record", "--db", str(db), "--campaign", "quick", "--scenario", "gps",
+    result = runner.invoke(app, ["trial", "record", str(db), "quick", "gps",
                                  "--error-cm", "-1"])
     assert result.exit_code == 2 and "--error-cm" in result.stderr

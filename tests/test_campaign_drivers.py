@@ -180,7 +180,7 @@ def test_one_local_worker_runs_its_trials_with_opencv_on_one_thread_and_gives_th
 def test_bad_executor_options_give_one_line(tmp_path):
     path = write_campaign(tmp_path, QUICK)
     runner = CliRunner()
-    for args, expected in ((["--executor", "dask"], "--executor: unknown executor 'dask' (known: local, ray)"),
+    for args, expected in ((["--executor", "dask"], "--executor: unknown executor 'dask' (expected one of: local, ray)"),
                            (["--ray-address", "auto"], "--ray-address: needs --executor ray"),
                            (["--executor", "ray", "--trial-cpus", "0"], "--trial-cpus: must be > 0, got 0")):
         result = runner.invoke(app, ["campaign", "run", str(path), "--db", str(tmp_path / "r.db"), *args])

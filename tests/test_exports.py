@@ -22,8 +22,8 @@ def db(tmp_path):
     path = seeded_store(tmp_path / "r.db")
     add_events_and_path(path)
     runner = CliRunner()
-    assert runner.invoke(app, ["trial", "record", "--db", str(path), "--campaign", "thesis_table3", "--scenario",
-                               "IRLock / none", "--error-cm", "5", "--x-cm", "3", "--y-cm", "4", "--note",
+    assert runner.invoke(app, ["trial", "record", str(path), "thesis_table3", "IRLock / none",
+                               "--error-cm", "5", "--x-cm", "3", "--y-cm", "4", "--note",
                                "a, \"quoted\"\nnote"]).exit_code == 0
     assert runner.invoke(app, ["trial", "amend", str(path), "thesis_table3", "IRLock / none", "0",
                                "--landing-time-s", "19.5"]).exit_code == 0

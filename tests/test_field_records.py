@@ -33,30 +33,30 @@ def seeded_store(path):
     return path
 
 
-def record(db, *args):
-    return CliRunner().invoke(app, ["trial", "record", "--db", str(db), *args])
+def record(db, campaign, scenario, *options):
+    return CliRunner().invoke(app, ["trial", "record", str(db), campaign, scenario, *options])
 
 
 def test_a_misspelt_campaign_or_scenario_is_refused_with_close_matches(tmp_path):
     db = seeded_store(tmp_path / "r.db")
-    result = record(db, "--campaign", "thesis_tabel3", "--scenario", "IRLock / none", "--error-cm", "4")
-    assert result.exit_code == 2 and "--campaign" in result.stderr and "'thesis_tabel3'" in result.stderr
+    result = record(db, "thesis_tabel3", "IRLock / none", "--error-cm", "4")
+    assert result.exit_code == 2 and "CAMPAIGN: " in result.stderr and "'thesis_tabel3'" in result.stderr
     assert "close: thesis_table3" in result.stderr and "--new" in result.stderr
-    result = record(db, "--campaign", "thesis_table3", "--scenario", "IRlock / nne", "--error-cm", "4")
-    assert result.exit_code == 2 and "--scenario" in result.stderr and "'IRLock / none'" in result.stderr
+    result = record(db, "thesis_table3", "IRlock / nne", "--error-cm", "4")
+    assert result.exit_code == 2 and "SCENARIO: " in result.stderr and "'IRLock / none'" in result.stderr
     # A scenario of the campaign file that has not run yet is known too.
-    assert record(db, "--campaign", "thesis_table3", "--scenario", "Marker / none", "--error-cm", "4").exit_code == 0
+    assert record(db, "thesis_table3", "Marker / none", "--error-cm", "4").exit_code == 0
     with ResultsStore(db) as store:
         assert {t["campaign"] for t in store.trials()} == {"thesis_table3"}
         assert len(store.trials()) == 5
-    result = record(db, "--campaign", "field_day", "--scenario", "IRlock / nne", "--error-cm", "4", "--new")
+    result = record(db, "field_day", "IRlock / nne", "--error-cm", "4", "--new")
     assert result.exit_code == 0, result.output
     assert "recorded field trial 0 of field_day / IRlock / nne" in result.stdout
 
 
 def test_offsets_must_make_the_error_within_a_centimetre(tmp_path):
     db = seeded_store(tmp_path / "r.db")
-    base = ["--campaign", "thesis_table3", "--scenario", "IRLock / none"]
+    base = ["thesis_table3", "IRLock / none"]
     result = record(db, *base, "--error-cm", "5", "--x-cm", "30", "--y-cm", "40")
     assert result.exit_code == 2 and "--x-cm/--y-cm" in result.stderr and "50.0 cm" in result.stderr
     result = record(db, *base, "--error-cm", "5", "--x-cm", "3")
@@ -68,17 +68,17 @@ def test_offsets_must_make_the_error_within_a_centimetre(tmp_path):
 
 def test_a_land_mode_other_than_the_scenarios_is_refused(tmp_path):
     db = seeded_store(tmp_path / "r.db")
-    result = record(db, "--campaign", "thesis_table3", "--scenario", "IRLock / none", "--error-cm", "4",
+    result = record(db, "thesis_table3", "IRLock / none", "--error-cm", "4",
                     "--land", "marker")
     assert result.exit_code == 2 and "--land: marker differs" in result.stderr and "irlock" in result.stderr
-    result = record(db, "--campaign", "thesis_table3", "--scenario", "IRLock / none", "--error-cm", "4",
+    result = record(db, "thesis_table3", "IRLock / none", "--error-cm", "4",
                     "--land", "irlock")
     assert result.exit_code == 0
 
 
 def test_amend_keeps_an_audit_of_what_changed_and_delete_asks_and_keeps_the_row(tmp_path):
     db = seeded_store(tmp_path / "r.db")
-    base = ["--campaign", "thesis_table3", "--scenario", "IRLock / none"]
+    base = ["thesis_table3", "IRLock / none"]
     assert record(db, *base, "--error-cm", "5", "--x-cm", "3", "--y-cm", "4").exit_code == 0
     assert record(db, *base, "--error-cm", "7").exit_code == 0
     runner = CliRunner()
@@ -140,12 +140,12 @@ def test_a_store_from_before_the_audit_column_opens_and_gains_it(tmp_path):
 
 def test_the_report_works_with_any_mix_of_optional_fields(tmp_path):
     db = seeded_store(tmp_path / "r.db")
-    base = ["--campaign", "thesis_table3", "--scenario", "IRLock / none"]
+    base = ["thesis_table3", "IRLock / none"]
     for extra in (["--error-cm", "4"], ["--error-cm", "5", "--x-cm", "3", "--y-cm", "4"],
                   ["--error-cm", "6", "--landing-time-s", "21"], ["--outcome", "aborted"],
                   ["--error-cm", "9", "--outcome", "crashed", "--takeoff-altitude-m", "8"]):
         assert record(db, *base, *extra).exit_code == 0
-    assert record(db, "--campaign", "new_day", "--scenario", "only field", "--new", "--outcome", "aborted").exit_code == 0
+    assert record(db, "new_day", "only field", "--new", "--outcome", "aborted").exit_code == 0
     with ResultsStore(db) as store:
         summaries = summarize(store, "thesis_table3")
         field = next(s for s in summaries if s.label == "IRLock / none [field]")

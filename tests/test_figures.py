@@ -41,8 +41,8 @@ def test_png_at_300_dpi_by_default_and_vector_formats(tmp_path):
 
 def test_legends_say_what_every_mark_means_and_errors_over_two_orders_get_a_log_axis(tmp_path):
     db = seeded_store(tmp_path / "r.db")  # errors 3 and 4 cm
-    assert CliRunner().invoke(app, ["trial", "record", "--db", str(db), "--campaign", "thesis_table3",
-                                    "--scenario", "None / none", "--error-cm", "400", "--x-cm", "0", "--y-cm",
+    assert CliRunner().invoke(app, ["trial", "record", str(db), "thesis_table3", "None / none",
+                                    "--error-cm", "400", "--x-cm", "0", "--y-cm",
                                     "400"]).exit_code == 0
     assert report(db, tmp_path / "svg", "--format", "svg").exit_code == 0
     errors = (tmp_path / "svg" / "thesis_table3_errors.svg").read_text()
@@ -69,8 +69,8 @@ def test_field_rows_keep_their_scenarios_colour_and_scenarios_stay_distinct(tmp_
     db = seeded_store(tmp_path / "r.db")
     runner = CliRunner()
     for label in ("None / none", "IRLock / none"):
-        assert runner.invoke(app, ["trial", "record", "--db", str(db), "--campaign", "thesis_table3", "--scenario",
-                                   label, "--error-cm", "5"]).exit_code == 0
+        assert runner.invoke(app, ["trial", "record", str(db), "thesis_table3", label,
+                                   "--error-cm", "5"]).exit_code == 0
     with ResultsStore(db) as store:
         summaries = summarize(store, "thesis_table3")
     colors = scenario_colors(summaries)

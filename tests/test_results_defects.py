@@ -62,8 +62,7 @@ def test_the_report_works_after_a_field_trial_without_offsets(tmp_path):
 
     db = _quick_store(tmp_path)
     runner = CliRunner()
-    result = runner.invoke(app, ["trial", "record", "--db", str(db), "--campaign", "quick", "--scenario", "gps",
-                                 "--error-cm", "42"])
+    result = runner.invoke(app, ["trial", "record", str(db), "quick", "gps", "--error-cm", "42"])
     assert result.exit_code == 0, result.output
     result = runner.invoke(app, ["campaign", "report", str(db), "--out", str(tmp_path / "rep")])
     assert result.exit_code == 0, result.output

@@ -31,10 +31,8 @@ def add_events_and_path(db):
 
 def test_campaign_list_shows_campaigns_scenarios_counts_and_sources(tmp_path):
     db = seeded_store(tmp_path / "r.db")
-    assert run("trial", "record", "--db", db, "--campaign", "thesis_table3", "--scenario", "IRLock / none",
-               "--error-cm", "4").exit_code == 0
-    assert run("trial", "record", "--db", db, "--campaign", "day2", "--scenario", "hover", "--error-cm", "4",
-               "--new").exit_code == 0
+    assert run("trial", "record", db, "thesis_table3", "IRLock / none", "--error-cm", "4").exit_code == 0
+    assert run("trial", "record", db, "day2", "hover", "--error-cm", "4", "--new").exit_code == 0
     result = run("campaign", "list", db)
     assert result.exit_code == 0, result.output
     lines = result.stdout.splitlines()
@@ -59,8 +57,7 @@ def test_trial_show_prints_outcome_details_events_and_plots_the_path(tmp_path):
     assert "attempts           2" in out and "hand-over to land mode irlock" in out and "20.00 s" in out
     assert plot.read_bytes()[:4] == b"\x89PNG" and f"wrote {plot}" in out
     # A field trial of the same index is reached with --source; its corrections are shown.
-    assert run("trial", "record", "--db", db, "--campaign", "thesis_table3", "--scenario", "IRLock / none",
-               "--error-cm", "4").exit_code == 0
+    assert run("trial", "record", db, "thesis_table3", "IRLock / none", "--error-cm", "4").exit_code == 0
     assert run("trial", "amend", db, "thesis_table3", "IRLock / none", "0", "--error-cm", "4.5",
                "--reason", "tape slipped").exit_code == 0
     result = run("trial", "show", db, "thesis_table3", "IRLock / none", "0", "--source", "field")

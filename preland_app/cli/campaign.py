@@ -8,10 +8,22 @@ from typing import Optional
 import typer
 
 from ..errors import PrelandError
-from .app import EXIT_FAILED, app, check_sitl_speedup, fail, open_store, progress_bar
+from .app import EXIT_FAILED, app, check_sitl_speedup, choices, fail, open_store, progress_bar
 
 
-campaign_app = typer.Typer(help="Campaigns: repeated trials, a results store, reports.", no_args_is_help=True)
+def _executor_names() -> list[str]:
+    from ..campaign.executors import executor_names
+
+    return executor_names()
+
+
+# The executors are a registry (register_executor) with no entry point group: only Python code that runs
+# before the app can add one, and the choices are read from the registry when --executor is shown or checked,
+# so they are what it holds then.
+Executor = choices(_executor_names)
+
+campaign_app = typer.Typer(help="Campaigns: run repeated trials into a results store; list, report, compare, "
+                                "export, browse or delete what it holds.", no_args_is_help=True)
 app.add_typer(campaign_app, name="campaign")
 
 
@@ -34,8 +46,8 @@ def campaign_run(
                                              "of the binary's ArduPilot tree, else preland's own)."),
     tlog_dir: Optional[Path] = typer.Option(None, "--tlog-dir", help="With --sitl: one MAVLink telemetry log "
                                             "(.tlog) per trial in this folder."),
-    executor: str = typer.Option("local", "--executor", help="Where trials run: local (worker processes on "
-                                 "this machine) or ray (tasks of a Ray cluster)."),
+    executor: Executor = typer.Option("local", "--executor", help="Where trials run: local (worker processes "
+                                      "on this machine), ray (tasks of a Ray cluster) or a registered one."),
     ray_address: Optional[str] = typer.Option(None, "--ray-address", metavar="ADDR",
                                               help="With --executor ray: the cluster to join (auto, "
                                                    "ray://host:10001, host:6379; default $RAY_ADDRESS, else a "

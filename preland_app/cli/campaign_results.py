@@ -8,10 +8,34 @@ from typing import Optional
 import typer
 
 from ..errors import PrelandError
-from .app import EXIT_FAILED, columns, fail, open_store
+from .app import DPI, EXIT_FAILED, choices, columns, fail, open_store
 from .campaign import campaign_app
 
 FIGURE_FORMATS = ("png", "pdf", "svg")
+FigureFormat = choices(lambda: FIGURE_FORMATS)
+
+
+def _export_formats():
+    from ..campaign.export import FORMATS
+
+    return FORMATS
+
+
+def _export_tables():
+    from ..campaign.export import TABLES
+
+    return TABLES
+
+
+def _measures():
+    from ..campaign.compare import MEASURES
+
+    return MEASURES
+
+
+ExportFormat = choices(_export_formats)
+ExportTable = choices(_export_tables)
+Measure = choices(_measures)
 
 
 def parse_trial(text: str | None) -> tuple[str, int] | None:
@@ -29,8 +53,8 @@ def campaign_report(
     db: Path = typer.Argument(..., metavar="DB", help="SQLite results database."),
     campaign: Optional[str] = typer.Option(None, "--campaign", help="Campaign name (default: every campaign)."),
     out: Path = typer.Option(Path("report"), "--out", help="Folder for the Markdown, CSV and figure files."),
-    figure_format: str = typer.Option("png", "--format", help="Figure format: png, pdf or svg."),
-    dpi: int = typer.Option(300, "--dpi", help="PNG resolution in dots per inch (PDF and SVG are vector)."),
+    figure_format: FigureFormat = typer.Option("png", "--format", help="Figure format."),
+    dpi: int = typer.Option(DPI, "--dpi", help="PNG resolution in dots per inch (PDF and SVG are vector)."),
     trial: Optional[str] = typer.Option(None, "--trial", metavar="SCENARIO:INDEX",
                                         help="The trial the trajectory figure shows (default: the first landed "
                                              "trial of the first precision scenario)."),
@@ -40,9 +64,6 @@ def campaign_report(
     from ..campaign.catalog import require_campaign
     from ..campaign.report import markdown_table, summarize, write_report
 
-    if figure_format not in FIGURE_FORMATS:
-        raise fail(f"--format: unknown figure format {figure_format!r} (expected one of: "
-                   f"{', '.join(FIGURE_FORMATS)})")
     if not 50 <= dpi <= 1200:
         raise fail(f"--dpi: must be within 50..1200, got {dpi}")
     chosen = parse_trial(trial)
@@ -69,10 +90,10 @@ def campaign_report(
 @campaign_app.command("export")
 def campaign_export(
     db: Path = typer.Argument(..., metavar="DB", help="SQLite results database."),
-    export_format: str = typer.Option("csv", "--format", help="csv, jsonl (JSON Lines) or parquet (needs the "
-                                      "parquet extra: pip install 'preland[parquet]')."),
-    table: str = typer.Option("trials", "--table", help="trials (one row per trial), events (one per event) or "
-                              "trajectories (one per 2 Hz sample); trial_id joins them."),
+    export_format: ExportFormat = typer.Option("csv", "--format", help="jsonl is JSON Lines; parquet needs the "
+                                               "parquet extra: pip install 'preland\\[parquet]'."),
+    table: ExportTable = typer.Option("trials", "--table", help="trials: one row per trial, events: one per event, "
+                                      "trajectories: one per 2 Hz sample; trial_id joins them."),
     campaign: Optional[str] = typer.Option(None, "--campaign", help="Only this campaign."),
     out: Optional[Path] = typer.Option(None, "--out", help="Output file (default: standard output; Parquet "
                                        "needs a file)."),
@@ -151,13 +172,11 @@ def _one_campaign(store, db: Path, name: str | None) -> str:
 def campaign_compare(
     before: str = typer.Argument(..., metavar="DB[:CAMPAIGN]", help="The reference run."),
     after: str = typer.Argument(..., metavar="DB[:CAMPAIGN]", help="The run to compare with it."),
-    measure: str = typer.Option("landing_error_cm", "--measure", help="landing_error_cm or landing_time_s."),
+    measure: Measure = typer.Option("landing_error_cm", "--measure", help="The measure compared."),
 ) -> None:
     """Per-scenario difference of the means (after - before) with bootstrap 95 % confidence intervals."""
     from ..campaign.compare import MEASURES, compare
 
-    if measure not in MEASURES:
-        raise fail(f"--measure: expected one of {', '.join(MEASURES)}, got {measure!r}")
     (db_b, name_b), (db_a, name_a) = _db_campaign(before), _db_campaign(after)
     store_b, store_a = open_store(db_b, must_exist=True), open_store(db_a, must_exist=True)
     try:
@@ -227,7 +246,7 @@ def campaign_browse(
     metadata_out: Optional[Path] = typer.Option(None, "--metadata", help="Only write Datasette's metadata file "
                                                 "(units, descriptions, canned queries) here and exit."),
 ) -> None:
-    """Browse the store in Datasette (optional: pip install 'preland[browse]'), with units, descriptions and
+    r"""Browse the store in Datasette (optional: pip install 'preland\[browse]'), with units, descriptions and
     canned queries for the thesis' tables; Ctrl-C stops it."""
     import tempfile
 

@@ -8,9 +8,32 @@ from typing import Optional
 import typer
 
 from ..errors import PrelandError
-from .app import EXIT_FAILED, app, fail
+from .app import DPI, EXIT_FAILED, PAD_DPI, app, choices, fail
 
 VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4")  # the containers VideoRecorder writes (FFV1, mp4v)
+
+
+def _pad_presets():
+    from ..sensing.pad import PAD_PRESETS
+
+    return PAD_PRESETS
+
+
+def _paper_sizes():
+    from ..sensing.pad_render import PAPER_SIZES_M  # imports matplotlib: only when pad render needs the sizes
+
+    return PAPER_SIZES_M
+
+
+def _dictionaries():
+    from ..sensing.pad import DICTIONARIES
+
+    return DICTIONARIES
+
+
+PadPreset = choices(_pad_presets)
+PaperSize = choices(_paper_sizes)
+Dictionary = choices(_dictionaries)
 
 
 pad_app = typer.Typer(help="Landing pads: render printable pads.", no_args_is_help=True)
@@ -20,16 +43,19 @@ app.add_typer(pad_app, name="pad")
 @pad_app.command("render")
 def pad_render(
     out: Path = typer.Option(..., "--out", help="Output file: .png or .pdf."),
-    preset: Optional[str] = typer.Option(None, "--preset", help="Pad preset: thesis or paper."),
+    preset: Optional[PadPreset] = typer.Option(None, "--preset", help="Pad preset."),
     pad_file: Optional[Path] = typer.Option(None, "--pad", help="A pad YAML file instead of a preset."),
-    dpi: int = typer.Option(100, "--dpi", help="Print resolution in dots per inch."),
-    paper: Optional[str] = typer.Option(None, "--paper", help="Tile the sheet onto A4 or A3 pages (one PDF page, "
-                                        "or one PNG file, per tile), with crop marks to cut and join them."),
+    dpi: int = typer.Option(PAD_DPI, "--dpi", help=f"Print resolution in dots per inch (not {DPI} as for "
+                            "figures and boards: a pad's cells are centimetres wide, and rendering a pad "
+                            f"sheet at {DPI} dpi takes gigabytes of memory)."),
+    paper: Optional[PaperSize] = typer.Option(None, "--paper", help="Tile the sheet onto pages of this size (one "
+                                              "PDF page, or one PNG file, per tile), with crop marks to cut and "
+                                              "join them."),
 ) -> None:
     """Render a printable landing pad at true scale, with its dimensions annotated, a sheet outline and crop
     marks."""
-    from ..sensing.pad import PAD_PRESETS, load_pad
-    from ..sensing.pad_render import PAPER_SIZES_M, render_printable_pad
+    from ..sensing.pad import load_pad
+    from ..sensing.pad_render import render_printable_pad
 
     if (preset is None) == (pad_file is None):
         raise fail("give exactly one of --preset or --pad")
@@ -37,10 +63,6 @@ def pad_render(
         raise fail(f"--out: {out} must end in .png or .pdf")
     if not 20 <= dpi <= 600:
         raise fail(f"--dpi: must be within 20..600, got {dpi}")
-    if paper is not None and paper not in PAPER_SIZES_M:
-        raise fail(f"--paper: expected one of {', '.join(PAPER_SIZES_M)}, got {paper!r}")
-    if preset is not None and preset not in PAD_PRESETS:
-        raise fail(f"--preset: unknown pad preset {preset!r} (expected one of: {', '.join(PAD_PRESETS)})")
     try:
         pad = load_pad(preset if preset is not None else str(pad_file))
     except PrelandError as error:
@@ -56,7 +78,7 @@ def detect(
     camera_source: Optional[str] = typer.Option(None, "--camera", metavar="SRC",
                                                 help="Capture device: index (0), device path, or GStreamer pipeline."),
     video: Optional[Path] = typer.Option(None, "--video", help="A video file instead of a camera."),
-    pad_name: str = typer.Option("thesis", "--pad", help="Pad preset (thesis, paper) or pad YAML file."),
+    pad_name: str = typer.Option("thesis", "--pad", help="Pad preset (as pad render --preset) or pad YAML file."),
     calibration: Optional[Path] = typer.Option(None, "--calibration", help="OpenCV calibration file."),
     out: Optional[Path] = typer.Option(None, "--out", help="Write the annotated frames to this video."),
     frames: int = typer.Option(0, "--frames", help="Stop after this many frames (0: the whole video, or Ctrl-C)."),
@@ -192,7 +214,8 @@ def _readable_video(path: Path) -> bool:
         capture.release()
 
 
-camera_app = typer.Typer(help="Cameras: calibration.", no_args_is_help=True)
+camera_app = typer.Typer(help="Cameras: render a printable ChArUco board, calibrate a camera from views of it.",
+                         no_args_is_help=True)
 app.add_typer(camera_app, name="camera")
 
 
@@ -203,8 +226,8 @@ def camera_board(
     squares_y: int = typer.Option(5, "--squares-y", help="Board squares down."),
     square_m: float = typer.Option(0.04, "--square-m", help="Square side in m."),
     marker_m: float = typer.Option(0.03, "--marker-m", help="Marker side in m."),
-    dictionary: str = typer.Option("DICT_4X4_50", "--dictionary", help="ArUco dictionary of the board."),
-    dpi: int = typer.Option(300, "--dpi", help="Print resolution in dots per inch."),
+    dictionary: Dictionary = typer.Option("DICT_4X4_50", "--dictionary", help="ArUco dictionary of the board."),
+    dpi: int = typer.Option(DPI, "--dpi", help="Print resolution in dots per inch."),
 ) -> None:
     """Render a printable ChArUco board at true scale for camera calibrate (same options)."""
     from ..sensing.board_render import render_charuco_board
@@ -229,7 +252,7 @@ def camera_calibrate(
     squares_y: int = typer.Option(5, "--squares-y", help="Board squares down."),
     square_m: float = typer.Option(0.04, "--square-m", help="Square side in m."),
     marker_m: float = typer.Option(0.03, "--marker-m", help="Marker side in m."),
-    dictionary: str = typer.Option("DICT_4X4_50", "--dictionary", help="ArUco dictionary of the board."),
+    dictionary: Dictionary = typer.Option("DICT_4X4_50", "--dictionary", help="ArUco dictionary of the board."),
 ) -> None:
     """Calibrate a camera from views of a ChArUco board; writes a file the marker sensor reads."""
     from ..sensing.calibration import calibrate, read_images

@@ -9,8 +9,10 @@ from typing import Optional
 import typer
 
 from ..errors import PrelandError
-from .app import EXIT_FAILED, app, check_sitl_speedup, fail
-from ..landing.registry import LAND_MODES
+from .app import EXIT_FAILED, app, check_sitl_speedup, choices, fail
+from ..landing.registry import LAND_MODES, PRECISION_SENSORS
+
+PrecisionSensor = choices(lambda: PRECISION_SENSORS)
 
 
 def _format_outcome_table(data: dict) -> str:
@@ -86,8 +88,8 @@ def fly(
                                        help=f"Land mode, overriding the mission's: {', '.join(LAND_MODES)}, an "
                                             "installed plugin's name (preland modes), or an import path "
                                             "package.module:ClassName (its folder on PYTHONPATH)."),
-    sensor: Optional[str] = typer.Option(None, "--sensor", metavar="SENSOR",
-                                         help="Precision sensor of the cautious mode: irlock, marker or fused."),
+    sensor: Optional[PrecisionSensor] = typer.Option(None, "--sensor", help="Precision sensor of the cautious "
+                                                     "mode."),
     fault: list[str] = typer.Option([], "--fault", metavar="SENSOR=FAULT",
                                     help="Drop a sensor's values (repeatable, one per sensor): none, random:P, "
                                          "periodic:KEEP:DROP, permanent, below:H, above:H; add :first-attempt "
@@ -228,8 +230,8 @@ def _check_record_target(db: Path, campaign: str, scenario: str) -> None:
     try:
         check_names(store, campaign, scenario)
     except FieldRecordError as error:
-        raise fail(f"--record-to {db}: {error} (record a new one's first trial with preland trial record "
-                   "--new)") from None
+        raise fail(f"--record-to {db}: {error} (record a new one's first trial with preland trial record DB "
+                   "CAMPAIGN SCENARIO --new, or fly with --new)") from None
     finally:
         store.close()
 

@@ -4,8 +4,17 @@ from __future__ import annotations
 
 import typer
 
-from .app import app, fail
+from .app import app, choices
 from .app import columns
+
+
+def _schema_kinds():
+    from ..config.schema import SCHEMA_KINDS
+
+    return SCHEMA_KINDS
+
+
+SchemaKind = choices(_schema_kinds)
 
 
 @app.command("modes")
@@ -19,11 +28,9 @@ def modes() -> None:
 
 
 @app.command("schema")
-def schema(kind: str = typer.Argument(..., metavar="mission|campaign|pad", help="Which file's schema.")) -> None:
-    """Print the JSON Schema of mission, campaign or pad files (for editors: yaml-language-server)."""
-    from ..config.schema import SCHEMA_KINDS, schema_text
+def schema(kind: SchemaKind = typer.Argument(..., metavar="KIND", help="Which kind of file.")) -> None:
+    """Print the JSON Schema of one kind of preland file (for editors: yaml-language-server)."""
+    from ..config.schema import schema_text
 
-    if kind not in SCHEMA_KINDS:
-        raise fail(f"schema: unknown kind {kind!r} (expected one of: {', '.join(SCHEMA_KINDS)})")
     typer.echo(schema_text(kind), nl=False)
 

@@ -8,10 +8,11 @@ from typing import Optional
 import typer
 
 from ..errors import PrelandError
-from .app import EXIT_FAILED, app, fail
+from .app import EXIT_FAILED, app, choices, fail
 
 
-sim_app = typer.Typer(help="The embedded simulator as a MAVLink vehicle.", no_args_is_help=True)
+sim_app = typer.Typer(help="The embedded simulator: serve it as a MAVLink vehicle, calibrate its parameters to "
+                           "field trials, list the calibratable params.", no_args_is_help=True)
 app.add_typer(sim_app, name="sim")
 
 
@@ -85,7 +86,16 @@ def sim_serve(
         typer.echo("stopped")
 
 
-fault_app = typer.Typer(help="The thesis' fault command, as a MAVLink message.", no_args_is_help=True)
+def _fault_targets() -> list[str]:
+    from ..sensing.faults import FaultTarget
+
+    return [target.name.lower() for target in FaultTarget]
+
+
+FaultTargetName = choices(_fault_targets)
+
+fault_app = typer.Typer(help="The thesis' fault command: send it to a companion as a MAVLink message.",
+                        no_args_is_help=True)
 app.add_typer(fault_app, name="fault")
 
 
@@ -94,7 +104,7 @@ def fault_send(
     connect: str = typer.Option(..., "--connect", metavar="URL",
                                 help="Where the companion takes fault commands (its --fault-listen), "
                                      "e.g. udp://127.0.0.1:14560."),
-    target: str = typer.Option(..., "--target", help="Sensor subsystem: irlock, marker or both."),
+    target: FaultTargetName = typer.Option(..., "--target", help="Sensor subsystem."),
     r_drop: float = typer.Option(0.0, "--r-drop", help="Drop probability (random mode; 1.0: permanent)."),
     p_keep: int = typer.Option(0, "--p-keep", help="Values to keep (periodic mode)."),
     p_drop: int = typer.Option(0, "--p-drop", help="Values to drop (periodic mode)."),
@@ -107,13 +117,10 @@ def fault_send(
     from ..mavlink.fault_message import ACK_IGNORED, FaultMessageError, send
     from ..sensing.faults import FaultCommand, FaultSyntaxError, FaultTarget
 
-    targets = {"irlock": FaultTarget.IRLOCK, "marker": FaultTarget.MARKER, "both": FaultTarget.BOTH}
-    if target not in targets:
-        raise fail(f"--target: expected irlock, marker or both, got {target!r}")
     if not 0.0 <= ack_timeout_s <= 60.0:
         raise fail(f"--ack-timeout-s: must be within 0..60 s, got {ack_timeout_s:g}")
     try:
-        command = FaultCommand(target=targets[target], r_drop=r_drop, p_keep=p_keep, p_drop=p_drop)
+        command = FaultCommand(target=FaultTarget[target.upper()], r_drop=r_drop, p_keep=p_keep, p_drop=p_drop)
     except FaultSyntaxError as error:
         raise fail(str(error)) from None
     try:

@@ -1,4 +1,12 @@
-"""preland trial: field trials (record, amend, delete) and one stored trial in detail (show)."""
+"""preland trial: field trials (record, amend, delete) and one stored trial in detail (show).
+
+All four take the trial's place in the store as positional arguments, DB CAMPAIGN SCENARIO, and everything else
+as options. show, amend and delete name an existing row, DB CAMPAIGN SCENARIO INDEX, as sqlite-utils names a
+table's row by its database, table and key; record creates one, so it takes the same place without the INDEX,
+which the store assigns (and record prints). The place is what every call needs and always in that order; the
+measurements vary, most are optional, and read best named (--error-cm 6 --x-cm 3).
+The earlier `trial record --db DB --campaign NAME --scenario LABEL` is refused in one line showing this form.
+"""
 
 from __future__ import annotations
 
@@ -6,9 +14,40 @@ from pathlib import Path
 from typing import Optional
 
 import typer
+from typer.core import TyperCommand
 
-from .app import app, fail
+from .app import DPI, app, choices, click_errors, fail
 from .app import open_store
+from .campaign_results import FIGURE_FORMATS
+
+
+def _outcomes() -> list[str]:
+    from ..outcome import Outcome
+
+    return [outcome.value for outcome in Outcome]
+
+
+def _sources():
+    from ..campaign.catalog import SOURCES
+
+    return SOURCES
+
+
+OutcomeName = choices(_outcomes)
+Source = choices(_sources)
+OLD_RECORD_OPTIONS = ("--db", "--campaign", "--scenario")  # trial record's place, as it was given before
+
+
+class _RecordCommand(TyperCommand):
+    """trial record: the place given as options, the earlier form, is refused showing the present one."""
+
+    def parse_args(self, ctx, args):
+        for word in args:
+            option = word.partition("=")[0]
+            if option in OLD_RECORD_OPTIONS:
+                raise click_errors.UsageError(f"{option}: trial record takes the database, campaign and scenario "
+                                              "as arguments: preland trial record DB CAMPAIGN SCENARIO [OPTIONS]")
+        return super().parse_args(ctx, args)
 
 
 trial_app = typer.Typer(help="One trial: show any stored trial; record, amend or delete field trials.",
@@ -16,18 +55,18 @@ trial_app = typer.Typer(help="One trial: show any stored trial; record, amend or
 app.add_typer(trial_app, name="trial")
 
 
-@trial_app.command("record")
+@trial_app.command("record", cls=_RecordCommand)
 def trial_record(
-    db: Path = typer.Option(..., "--db", help="SQLite results database (created if missing)."),
-    campaign: str = typer.Option(..., "--campaign", help="Campaign the trial belongs to (as stored)."),
-    scenario: str = typer.Option(..., "--scenario", help="Scenario label (as in the campaign file)."),
+    db: Path = typer.Argument(..., metavar="DB", help="SQLite results database (created if missing)."),
+    campaign: str = typer.Argument(..., metavar="CAMPAIGN", help="Campaign the trial belongs to (as stored)."),
+    scenario: str = typer.Argument(..., metavar="SCENARIO", help="Scenario label (as in the campaign file)."),
     error_cm: Optional[float] = typer.Option(None, "--error-cm", help="Tape-measured landing error in cm "
                                              "(needed when the outcome is landed)."),
     x_cm: Optional[float] = typer.Option(None, "--x-cm", help="Offset north (x) in cm; with --y-cm, within 1 cm "
                                          "of --error-cm."),
     y_cm: Optional[float] = typer.Option(None, "--y-cm", help="Offset east (y) in cm."),
     landing_time_s: Optional[float] = typer.Option(None, "--landing-time-s", help="Landing time in s."),
-    outcome: str = typer.Option("landed", "--outcome", help="landed, aborted, crashed..."),
+    outcome: OutcomeName = typer.Option("landed", "--outcome", help="How the trial ended."),
     land_mode: Optional[str] = typer.Option(None, "--land", help="Land mode flown (must be the scenario's)."),
     takeoff_altitude_m: Optional[float] = typer.Option(None, "--takeoff-altitude-m", help="Initial height in m."),
     note: str = typer.Option("", "--note", help="Free text."),
@@ -43,7 +82,11 @@ def trial_record(
     try:
         index = record(store, campaign=campaign, scenario=scenario, measurement=measurement, new=new)
     except FieldRecordError as error:
-        raise fail(str(error)) from None
+        message = str(error)
+        for option, argument in (("--campaign: ", "CAMPAIGN: "), ("--scenario: ", "SCENARIO: ")):
+            if message.startswith(option):  # the names' checks are shared with fly --record-to's options
+                message = argument + message[len(option):]
+        raise fail(message) from None
     finally:
         store.close()
     shown = "no error measured" if error_cm is None else f"{error_cm:g} cm"
@@ -60,7 +103,7 @@ def trial_amend(
     x_cm: Optional[float] = typer.Option(None, "--x-cm", help="Corrected offset north (x) in cm."),
     y_cm: Optional[float] = typer.Option(None, "--y-cm", help="Corrected offset east (y) in cm."),
     landing_time_s: Optional[float] = typer.Option(None, "--landing-time-s", help="Corrected landing time in s."),
-    outcome: Optional[str] = typer.Option(None, "--outcome", help="Corrected outcome."),
+    outcome: Optional[OutcomeName] = typer.Option(None, "--outcome", help="Corrected outcome."),
     land_mode: Optional[str] = typer.Option(None, "--land", help="Corrected land mode."),
     takeoff_altitude_m: Optional[float] = typer.Option(None, "--takeoff-altitude-m", help="Corrected height in m."),
     note: Optional[str] = typer.Option(None, "--note", help="Corrected note."),
@@ -118,22 +161,21 @@ def trial_show(
     campaign: str = typer.Argument(..., metavar="CAMPAIGN"),
     scenario: str = typer.Argument(..., metavar="SCENARIO"),
     index: int = typer.Argument(..., metavar="INDEX", help="Trial index within the scenario."),
-    source: Optional[str] = typer.Option(None, "--source", help="sim, sitl or field (default: the simulated "
-                                         "trial of that index, else the SITL one, else the field one)."),
-    plot: Optional[Path] = typer.Option(None, "--plot", help="Also draw its path into this file (.png, .pdf, "
-                                        ".svg)."),
-    dpi: int = typer.Option(300, "--dpi", help="With --plot to PNG: dots per inch."),
+    source: Optional[Source] = typer.Option(None, "--source", help="Where the trial ran (default: the simulated "
+                                            "trial of that index, else the SITL one, else the field one)."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Also draw its path into this file ("
+                                        + ", ".join(f".{suffix}" for suffix in FIGURE_FORMATS) + ")."),
+    dpi: int = typer.Option(DPI, "--dpi", help="With --plot to PNG: dots per inch."),
 ) -> None:
     """One stored trial in full: its outcome, details, audit and event log; its path with --plot."""
     import json
 
-    from ..campaign.catalog import SOURCES, find_trial
+    from ..campaign.catalog import find_trial
     from ..errors import PrelandError
 
-    if source is not None and source not in SOURCES:
-        raise fail(f"--source: expected one of {', '.join(SOURCES)}, got {source!r}")
-    if plot is not None and plot.suffix.lower() not in (".png", ".pdf", ".svg"):
-        raise fail(f"--plot: {plot} must end in .png, .pdf or .svg")
+    suffixes = [f".{suffix}" for suffix in FIGURE_FORMATS]
+    if plot is not None and plot.suffix.lower() not in suffixes:
+        raise fail(f"--plot: {plot} must end in {', '.join(suffixes[:-1])} or {suffixes[-1]}")
     store = open_store(db, must_exist=True)
     try:
         try:
