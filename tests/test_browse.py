@@ -3,12 +3,7 @@ headless browser."""
 
 import json
 import re
-import shutil
-import socket
 import sqlite3
-import subprocess
-import time
-import urllib.request
 
 import pytest
 from typer.testing import CliRunner
@@ -17,6 +12,7 @@ from preland_app.campaign import browse
 from preland_app.cli import app
 
 from .test_field_records import seeded_store
+from .tools import browser
 
 
 def test_metadata_gives_units_descriptions_and_canned_queries_that_run(tmp_path):
@@ -52,52 +48,24 @@ def test_browse_without_datasette_says_how_to_install_it(tmp_path, monkeypatch):
     assert result.exit_code == 2 and "pip install 'preland[browse]'" in result.stderr
 
 
-def _chromium() -> str | None:
-    return next((path for name in ("chromium", "chromium-browser", "google-chrome")
-                 if (path := shutil.which(name))), None)
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-def _dom(chromium: str, url: str) -> str:
-    """The page as a headless Chromium renders it (scripts run)."""
-    result = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom", url],
-                            capture_output=True, text=True, timeout=60)
-    assert result.returncode == 0, result.stderr[-2000:]
-    return result.stdout
-
-
 @pytest.mark.skipif(not browse.datasette_available(), reason="Datasette is not installed (the browse extra)")
-@pytest.mark.skipif(_chromium() is None, reason="no Chromium on this machine (apt-get install chromium)")
+@pytest.mark.skipif(browser.chromium() is None, reason="no Chromium on this machine (apt-get install chromium)")
 def test_the_datasette_page_lists_campaigns_and_runs_a_canned_query_in_headless_chromium(tmp_path):
     db = seeded_store(tmp_path / "results.db")
     assert CliRunner().invoke(app, ["trial", "record", str(db), "field_day", "hover", "--error-cm", "6",
                                     "--new"]).exit_code == 0
-    port = _free_port()
+    port = browser.free_port()
     server = browse.start(db, tmp_path / "metadata.json", port=port)
     try:
         base = f"http://127.0.0.1:{port}/results"
-        deadline = time.monotonic() + 30
-        while True:
-            try:
-                urllib.request.urlopen(base + ".json", timeout=2)
-                break
-            except OSError:
-                if time.monotonic() > deadline or server.poll() is not None:
-                    raise AssertionError("Datasette did not start") from None
-                time.sleep(0.2)
-        chromium = _chromium()
-        page = _dom(chromium, base + "/campaigns_overview")
+        browser.wait_for_http(base + ".json", timeout_s=30, process=server)
+        page = browser.dom(base + "/campaigns_overview")
         assert "Campaigns: scenarios and trials per source" in page
         assert "thesis_table3" in page and "field_day" in page
-        page = _dom(chromium, base + "/thesis_table?campaign=thesis_table3")
+        page = browser.dom(base + "/thesis_table?campaign=thesis_table3")
         assert "Thesis table: per-scenario figures of a campaign" in page
         assert "IRLock / none" in page and "None / none" in page and ">3.5<" in page.replace(" ", "")
-        page = _dom(chromium, base + "/trials?source=field")
+        page = browser.dom(base + "/trials?source=field")
         assert "field_day" in page
         # The unit from the metadata: Datasette shows the error as a quantity (it picks the prefix: 60 mm).
         cell = re.search(r'col-landing_error_cm type-Quantity">([0-9.]+)(?:&nbsp;|\xa0| )(mm|cm|m)<', page)
