@@ -49,48 +49,83 @@ def _mission(mission: MissionSpec | str | os.PathLike) -> MissionSpec:
     return mission if isinstance(mission, MissionSpec) else load_mission(mission)
 
 
+def runtime_url(runtime: str | None = None, *, connect: str | None = None,
+                sitl: str | os.PathLike | None = None) -> str | None:
+    """The runtime URL from `runtime` or one of its shorthands: `connect=URL` (a MAVLink link, as
+    `mavlink+...`) or `sitl=PATH` (`sitl:PATH`; `sitl=""`: $PRELAND_SITL_BINARY). None: the default, `sim:`.
+    ValueError when more than one is given."""
+    given = [name for name, value in (("runtime", runtime), ("connect", connect), ("sitl", sitl)) if value is not None]
+    if len(given) > 1:
+        raise ValueError(f"give at most one of {', '.join(given)}")
+    if connect is not None:
+        from .runtime.base import mavlink_url
+
+        return mavlink_url(connect)
+    if sitl is not None:
+        return f"sitl:{sitl}"
+    return runtime
+
+
+def trial_request(mission: MissionSpec | str | os.PathLike, *, seed: int = 1, land: str | None = None,
+                  land_params: Mapping[str, Any] | None = None, sensor: str | None = None,
+                  faults: Mapping[str, str] | None = None, takeoff_altitude_m: float | None = None,
+                  record_trajectory: bool = True):
+    """One trial of `mission` with its overrides, checked: a `TrialRequest`. An override that does not fit
+    raises SpecValueError naming the mission's field (`mode`, `sensor`, `faults.marker`, `params.gain`)."""
+    from .runtime.base import TrialRequest
+
+    request = TrialRequest(mission=_mission(mission), seed=seed, land_mode=land, sensor=sensor,
+                           faults=dict(faults) if faults is not None else None,
+                           takeoff_altitude_rel_m=takeoff_altitude_m, record_trajectory=record_trajectory,
+                           land_params=dict(land_params) if land_params is not None else None)
+    request.resolved_mission()
+    return request
+
+
 def fly(mission: MissionSpec | str | os.PathLike, *, seed: int = 1, land: str | None = None,
         land_params: Mapping[str, Any] | None = None, sensor: str | None = None,
         faults: Mapping[str, str] | None = None, takeoff_altitude_m: float | None = None,
-        connect: str | None = None, sitl: str | os.PathLike | None = None, sitl_speedup: float | None = None,
-        truth: bool = True, record_trajectory: bool = True) -> TrialOutcome:
+        runtime: str | None = None, options: Mapping[str, Any] | None = None, connect: str | None = None,
+        sitl: str | os.PathLike | None = None, sitl_speedup: float | None = None, truth: bool | None = None,
+        record_trajectory: bool = True, tlog_name: str | None = None) -> TrialOutcome:
     """Fly one trial of `mission` (a MissionSpec or a mission file) and return its outcome.
 
-    Runtime: the embedded simulator (default; virtual time, much faster than real time: hundreds of
-    times without a camera, tens of times with one),
-    `connect=URL` (MAVLink: `udpout://127.0.0.1:14550` for `preland sim serve`, a real drone; `truth=False`
-    when it reports no ground truth), or `sitl=PATH` (a fresh ArduPilot SITL `arducopter` process at
-    `sitl_speedup`; None: 2 for land modes that read camera frames, 10 for the others). `land`: a land mode by name or import path `package.module:ClassName`, overriding the
-    mission's; `land_params`: its keyword options (checked against its class). `faults`: sensor -> fault
+    `runtime`: a runtime URL (see `preland_app.runtime.base`): `sim:` (default; the embedded simulator in
+    virtual time, much faster than real time: hundreds of times without a camera, tens of times with one),
+    `sitl:PATH` (a fresh ArduPilot SITL `arducopter` process), `mavlink+udpout://127.0.0.1:14550` (`preland
+    sim serve`, a SITL already running, a drone). `options`: the runtime's options by name (an option it
+    does not take raises RuntimeOptionError). Shorthands: `connect=URL`, `sitl=PATH`, `sitl_speedup` (the
+    SITL runtime's `speedup`; None: 2 for land modes that read camera frames, 10 for the others), `truth`
+    (the MAVLink runtime's: False for a vehicle that reports no ground truth).
+    `land`: a land mode by name or import path `package.module:ClassName`, overriding the mission's;
+    `land_params`: its keyword options (checked against its class). `faults`: sensor -> fault
     (`{"marker": "below:3"}`). `takeoff_altitude_m`: above home. Same seed, same outcome (embedded).
     The outcome has `landing_error_cm`, `offset_north_cm`, `offset_east_cm`, `landing_time_s` (from the
     hand-over to the land mode to touchdown), `flight_time_s`, `details`, `events` and, with
     `record_trajectory`, `trajectory` (columns `TRAJECTORY_COLUMNS`: s, m)."""
     from .errors import SpecValueError
-    from .runtime.embedded import TrialRequest, run_trial
+    from .runtime.base import open_runtime
 
-    if connect is not None and sitl is not None:
-        raise ValueError("give at most one of connect= and sitl=")
     spec = _mission(mission)
-    request = TrialRequest(mission=spec, seed=seed, land_mode=land, sensor=sensor,
-                           faults=dict(faults) if faults is not None else None,
-                           takeoff_altitude_rel_m=takeoff_altitude_m, record_trajectory=record_trajectory,
-                           land_params=dict(land_params) if land_params is not None else None)
     try:
-        request.resolved_mission()
+        request = trial_request(spec, seed=seed, land=land, land_params=land_params, sensor=sensor, faults=faults,
+                                takeoff_altitude_m=takeoff_altitude_m, record_trajectory=record_trajectory)
     except SpecValueError as error:  # an override that does not fit: name it as the file's field would be
         raise SpecError(path=spec.source_path or spec.name, field=f"land.{error.field}", problem=error.problem) \
             from None
-    if sitl is not None:
-        from .runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial
+    chosen = open_runtime(runtime_url(runtime, connect=connect, sitl=sitl),
+                          _shorthand_options(options, sitl_speedup=sitl_speedup, truth=truth))
+    return _blocking(lambda: chosen.fly(request, tlog_name=tlog_name))
 
-        options = SitlOptions(binary=resolve_sitl_binary(sitl or None), speedup=sitl_speedup)
-        return _blocking(lambda: run_sitl_trial(request, options=options))
-    if connect is not None:
-        from .runtime.mavlink import run_mavlink_trial
 
-        return _blocking(lambda: run_mavlink_trial(request, url=connect, truth=truth))
-    return _blocking(lambda: run_trial(request))
+def _shorthand_options(options: Mapping[str, Any] | None, *, sitl_speedup: float | None,
+                       truth: bool | None) -> dict[str, Any]:
+    merged = dict(options or {})
+    if sitl_speedup is not None:
+        merged["speedup"] = sitl_speedup
+    if truth is not None:
+        merged["truth"] = truth
+    return merged
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -104,39 +139,52 @@ class CampaignRun:
 
 
 def run_campaign(campaign: CampaignSpec | str | os.PathLike, *, db: str | os.PathLike = "results.db",
-                 workers: int | None = None, resume: bool = False, sitl: str | os.PathLike | None = None,
+                 workers: int | None = None, resume: bool = False, runtime: str | None = None,
+                 options: Mapping[str, Any] | None = None, sitl: str | os.PathLike | None = None,
                  sitl_speedup: float | None = None, progress: Callable[[int, int, Any], None] | None = None,
                  executor: str = "local", ray_address: str | None = None, trial_cpus: float = 1.0,
                  outcomes_only: bool = False) -> CampaignRun:
     """Run a campaign (a CampaignSpec or a campaign file) into the SQLite store `db`.
 
+    `runtime`: where every trial flies, a runtime URL as for `fly` (default: the campaign file's
+    `runtime:`, else `sim:`), with `options` (the runtime's, by name); `sitl=PATH` and `sitl_speedup` are
+    shorthands. A runtime that flies one vehicle (`mavlink+...`) flies the trials one after another: more
+    than one worker, or another executor than `local`, is refused.
     `executor="local"` (default): each trial in a worker process on this machine (`workers`, default one
     per core; a plugin land mode's module must be importable there: on sys.path or PYTHONPATH).
     `executor="ray"`: each trial a task of a Ray cluster (`trial_cpus` CPUs each): the one at `ray_address`
     (`auto`, `ray://host:10001`), else $RAY_ADDRESS, else the one this process already joined, else a local
-    Ray instance of `workers` CPUs that is stopped again at the end; the store stays on this machine.
+    Ray instance of `workers` CPUs that is stopped again at the end; the store stays on this machine (a
+    SITL trial there finds the binary as the nodes see it; `sitl=""`: each node's $PRELAND_SITL_BINARY).
     `resume=True` finishes a campaign already in the store without repeating a trial; a second driver on the
-    same campaign and store is refused (`CampaignBusy`). `sitl=PATH`: every trial on a fresh ArduPilot SITL
-    process (on Ray, PATH as the nodes see it; `sitl=""` there: each node's $PRELAND_SITL_BINARY).
-    `outcomes_only=True`: no event logs and trajectories in the store. `progress(done, total, record)` is
-    called as trials finish. Read the results back with `read_results`."""
+    same campaign and store is refused (`CampaignBusy`). `outcomes_only=True`: no event logs and
+    trajectories in the store. `progress(done, total, record)` is called as trials finish. Read the results
+    back with `read_results`."""
     from .campaign.driver import run_campaign as execute
     from .campaign.executors import ExecutorOptions, create_executor, executor_factory
     from .campaign.store import ResultsStore
+    from .runtime.base import RuntimeOptionError, open_runtime
 
     spec = campaign if isinstance(campaign, CampaignSpec) else load_campaign(campaign)
+    chosen = open_runtime(runtime_url(runtime, sitl=sitl) or spec.runtime,
+                          _shorthand_options(options, sitl_speedup=sitl_speedup, truth=None))
+    if chosen.max_workers is not None:
+        if executor != "local":
+            raise RuntimeOptionError(option="executor", runtime=chosen.url,
+                                     problem=f"{chosen.url} is one vehicle, flown from this machine: "
+                                             "use the local executor")
+        if workers is not None and workers > chosen.max_workers:
+            raise RuntimeOptionError(option="workers", runtime=chosen.url,
+                                     problem=f"{chosen.url} is one vehicle: its trials fly one at a time "
+                                             f"(at most {chosen.max_workers} worker), got {workers}")
+        workers = chosen.max_workers
+    if not getattr(executor_factory(executor), "runs_elsewhere", False):
+        chosen = chosen.on_this_machine()  # a missing SITL binary is refused before any trial starts
     trial_executor = create_executor(executor, ExecutorOptions(workers=workers, address=ray_address,
                                                                trial_cpus=trial_cpus))
-    options = None
-    if sitl is not None:
-        from .runtime.sitl import SitlOptions, resolve_sitl_binary
-
-        elsewhere = getattr(executor_factory(executor), "runs_elsewhere", False)
-        binary = (Path(sitl) if sitl else None) if elsewhere else resolve_sitl_binary(sitl or None)
-        options = SitlOptions(binary=binary, speedup=sitl_speedup)
     with ResultsStore(db) as store:
-        ran, total = execute(spec, store, resume=resume, progress=progress, sitl=options, executor=trial_executor,
-                             outcomes_only=outcomes_only)
+        ran, total = execute(spec, store, resume=resume, progress=progress, runtime=chosen,
+                             executor=trial_executor, outcomes_only=outcomes_only)
     return CampaignRun(name=spec.name, db=Path(db), ran=ran, total=total)
 
 

@@ -22,7 +22,7 @@ from preland_app.campaign.executors.ray import RayExecutor
 from preland_app.campaign.spec import load_campaign
 from preland_app.campaign.store import ResultsStore
 from preland_app.cli import app
-from preland_app.runtime.sitl import SITL_ENV, SitlOptions
+from preland_app.runtime.sitl import SITL_ENV, SitlOptions, SitlRuntime
 
 from .conftest import ROOT
 from .test_campaign import QUICK, comparable, write_campaign
@@ -261,14 +261,14 @@ def test_sitl_trials_need_sitl_nodes_and_use_their_binary_and_a_trial_must_fit_a
     campaign = load_campaign(write_campaign(tmp_path, "name: on_sitl\ntrials: 1\n"
                                                       "scenarios: [{label: gps, land: normal}]\n"))
     with ResultsStore(":memory:") as store:
-        assert run_campaign(campaign, store, executor="ray", sitl=SitlOptions(binary=None)) == (1, 1)
+        assert run_campaign(campaign, store, executor="ray", runtime=SitlRuntime(options=SitlOptions(binary=None))) == (1, 1)
         (trial,) = store.trials("on_sitl")
     assert trial["source"] == "sitl" and trial["outcome"] == "error"
     assert f"{NODE_SITL} exited at once" in trial["message"]
     with ResultsStore(":memory:") as store, pytest.raises(ExecutorError, match="has 4 CPUs for one trial"):
         run_campaign(campaign, store, executor=create_executor("ray", ExecutorOptions(trial_cpus=4)))
     with ResultsStore(":memory:") as store, pytest.raises(ExecutorError, match="advertises the 'sitl_x86' resource"):
-        run_campaign(campaign, store, sitl=SitlOptions(binary=None),
+        run_campaign(campaign, store, runtime=SitlRuntime(options=SitlOptions(binary=None)),
                      executor=create_executor("ray", ExecutorOptions(sitl_resource="sitl_x86")))
 
 

@@ -240,14 +240,15 @@ def test_parameters_are_read_and_written_with_ardupilots_types(thesis_mission):
     assert served.simulator.params.value("PLND_ENABLED") == 1 and served.simulator.params.value("PLND_TIMEOUT") == 2.5
 
 
-def test_tcp_urls_reach_mavsdk_as_tcpout_and_others_unchanged():
+def test_urls_reach_mavsdk_in_its_own_spelling():
     """ArduPilot documents SITL and telemetry servers as tcp://host:port; MAVSDK 3 deprecates that spelling
     for tcpout://."""
     from preland_app.vehicle.mavlink_backend import mavsdk_connection_url
 
     assert mavsdk_connection_url("tcp://127.0.0.1:5760") == "tcpout://127.0.0.1:5760"
-    for url in ("tcpout://10.0.0.2:5760", "tcpin://0.0.0.0:5760", "udp://:14550", "udpout://127.0.0.1:14550",
-                "serial:///dev/ttyAMA0:921600"):
+    assert mavsdk_connection_url("udp://:14550") == "udpin://0.0.0.0:14550"  # MAVSDK 3 deprecates udp://
+    for url in ("tcpout://10.0.0.2:5760", "tcpin://0.0.0.0:5760", "udpin://127.0.0.1:14550",
+                "udpout://127.0.0.1:14550", "serial:///dev/ttyAMA0:921600"):
         assert mavsdk_connection_url(url) == url
 
 

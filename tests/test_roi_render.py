@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import preland_app.runtime.embedded as embedded
+import preland_app.runtime.sensors as sensors_module
 from preland_app.config.mission import load_mission
 from preland_app.runtime.embedded import TrialRequest, run_trial
 from preland_app.sensing.camera import RPI_CAMERA_V2_640X480, Frame
@@ -151,7 +151,7 @@ def test_window_detections_match_the_whole_frame_over_a_flown_descent(monkeypatc
         detectors.append(_ComparingDetector(pad=pad, camera=camera, parameters=parameters))
         return detectors[-1]
 
-    monkeypatch.setattr(embedded, "TrackingMarkerDetector", comparing)
+    monkeypatch.setattr(sensors_module, "TrackingMarkerDetector", comparing)
     mission = load_mission(ROOT / "missions" / mission_file)
     if settings:
         mission = replace(mission, sensors=replace(mission.sensors, marker=replace(mission.sensors.marker,

@@ -52,9 +52,10 @@ BOXES = (
         "sensing/suite.py: SensorSuite", "sensing/virtual_camera.py: VirtualCamera",
         "sensing/marker.py: TrackingMarkerDetector", "sensing/irlock.py: IrLockModel",
         "sensing/faults.py: FaultInjector"), C["sensing"]),
-    Box("runtime", 15.55, 9.4, 8.5, 2.1, "runtime: TrialRequest(mission, seed)", (
-        "runtime/embedded.py: TrialRequest, run_trial", "runtime/sitl.py: run_sitl_trial",
-        "runtime/mavlink.py: run_mavlink_trial", "embedded simulator | ArduPilot SITL | MAVLink"), C["runtime"]),
+    Box("runtime", 15.55, 9.4, 8.5, 2.1, "runtime (sim:, sitl:, mavlink+): fly()", (
+        "runtime/base.py: TrialRequest, open_runtime", "runtime/embedded.py: EmbeddedRuntime",
+        "runtime/sitl.py: SitlRuntime", "runtime/mavlink.py: MavlinkRuntime"),
+        C["runtime"]),
     Box("land", 3.65, 6.45, 6.5, 1.55, "land mode", ("landing/base.py: LandStrategy, LandingContext",
                                                     "landing/precision.py: PrecisionLanding",
                                                     "landing/boundary.py: SensorView"), C["mission"]),

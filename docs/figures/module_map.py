@@ -122,9 +122,9 @@ POSITIONS = {
     "runtime": (4, 2),
     "outcome.py": (0, 3), "mission.py": (6, 3),
     "config": (2, 4),
-    "mavlink": (0, 5), "field": (2, 5), "landing": (4, 5), "sim": (6, 5),
-    "sensing": (1, 6),
-    "vehicle": (2, 7),
+    "vehicle": (0, 5), "field": (2, 5), "landing": (4, 5), "sim": (6, 5),
+    "mavlink": (6, 7),
+    "sensing": (0, 8),
 }
 BOX_W, BOX_H, COLUMN_W, ROW_H = 3.7, 1.2, 3.2, 2.05
 HIT_MARGIN = 0.1  # an arrow this close to a box it does not join counts as running over it

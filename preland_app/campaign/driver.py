@@ -15,7 +15,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from ..errors import PrelandError
-from ..runtime.sitl import SitlOptions
+from ..runtime.base import Runtime
+from ..runtime.embedded import EmbeddedRuntime
 from .executors import ExecutorOptions, TrialExecutor, create_executor
 from .lease import HEARTBEAT_PERIOD_S, DriverLease
 from .spec import CampaignSpec, resolve_scenarios, spec_hash
@@ -37,17 +38,17 @@ class CampaignInterrupted(PrelandError):
 
 
 def run_campaign(campaign: CampaignSpec, store: ResultsStore, *, workers: int | None = None, resume: bool = False,
-                 progress: Progress | None = None, sitl: SitlOptions | None = None,
+                 progress: Progress | None = None, runtime: Runtime = EmbeddedRuntime(),
                  executor: str | TrialExecutor = "local", options: ExecutorOptions | None = None,
                  outcomes_only: bool = False) -> tuple[int, int]:
-    """Run the campaign's pending trials (on the embedded simulator, or on SITL binaries) on `executor`
+    """Run the campaign's pending trials on `runtime` (default: the embedded simulator) on `executor`
     (a registered name, `options` for it, or an executor object), storing each as it finishes; with
     `outcomes_only`, without event logs and trajectories. `workers` is `options.workers` when no options are
     given. Returns (trials run now, trials in the campaign)."""
     if isinstance(executor, str):
         executor = create_executor(executor, options or ExecutorOptions(workers=workers))
     scenarios = resolve_scenarios(campaign)
-    source = "sitl" if sitl is not None else "sim"
+    source = runtime.source
     lease = DriverLease(store, campaign=campaign.name, source=source, executor=executor.name or "custom")
     total = sum(scenario.trials for scenario in scenarios)
     finished = 0
@@ -55,7 +56,7 @@ def run_campaign(campaign: CampaignSpec, store: ResultsStore, *, workers: int | 
         lease.acquire()
         try:
             done = _check_store(campaign, scenarios, store, source=source, resume=resume)
-            pending = (job for job in plan_trials(campaign, scenarios, sitl=sitl, outcomes_only=outcomes_only)
+            pending = (job for job in plan_trials(campaign, scenarios, runtime=runtime, outcomes_only=outcomes_only)
                        if job.key not in done)
             finished = sum(1 for s in scenarios for i in range(s.trials) if (s.spec.label, i) in done)
             if progress:

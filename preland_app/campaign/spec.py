@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config.loader import build, deep_merge, load_spec_file
+from ..runtime.base import RuntimeUrlError, split_url
 from ..config.mission import FAULTS_SCHEMA, HASH_NEVER, HASH_WHEN_SET, PARAMS_SCHEMA, MissionSpec, load_mission
 from ..errors import SpecError, SpecValueError, require
 from ..sim.spec import EnvironmentSpec
@@ -69,7 +70,9 @@ class ScenarioSpec:
 @dataclass(frozen=True)
 class CampaignSpec:
     """A campaign. `mission` is a mission file relative to the campaign file; `pad` overrides its pad preset;
-    `sim_profile`: a simulation profile file (relative to the campaign) taking the place of the mission's."""
+    `sim_profile`: a simulation profile file (relative to the campaign) taking the place of the mission's.
+    `runtime`: where the trials fly, a runtime URL (`sim:`, the default; `sitl:PATH`; `mavlink+udp://...`);
+    `preland campaign run --runtime` overrides it."""
 
     name: str
     mission: str
@@ -79,11 +82,17 @@ class CampaignSpec:
     description: str = ""
     pad: str | None = None
     sim_profile: str | None = field(default=None, metadata=HASH_NEVER)
+    runtime: str | None = field(default=None, metadata=HASH_NEVER)
     source_path: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         require(bool(re.fullmatch(r"[A-Za-z0-9_.-]+", self.name)), "name",
                 "must be a non-empty word (letters, digits, _ . -)")
+        if self.runtime is not None:
+            try:
+                split_url(self.runtime)
+            except RuntimeUrlError as error:
+                require(False, "runtime", str(error))
         require(self.trials > 0, "trials", f"must be > 0, got {self.trials}")
         require(len(self.scenarios) > 0, "scenarios", "needs at least one scenario")
         labels = [s.label for s in self.scenarios]

@@ -19,8 +19,8 @@ from pathlib import Path
 
 from ..config.mission import MissionSpec
 from ..outcome import TRAJECTORY_COLUMNS, Outcome
-from ..runtime.embedded import TrialRequest, run_trial
-from ..runtime.sitl import SitlOptions
+from ..runtime.base import Runtime, TrialRequest
+from ..runtime.embedded import EmbeddedRuntime
 from .spec import CampaignSpec, ResolvedScenario
 from .store import TrialRecord
 
@@ -40,7 +40,7 @@ class TrialJob:
     spec_hash: str
     mission: MissionSpec
     takeoff_altitude_rel_m: float
-    sitl: SitlOptions | None = None
+    runtime: Runtime = EmbeddedRuntime()
     outcomes_only: bool = False
 
     @property
@@ -49,7 +49,7 @@ class TrialJob:
 
     @property
     def source(self) -> str:
-        return "sitl" if self.sitl is not None else "sim"
+        return self.runtime.source
 
 
 def derive_seed(base_seed: int, scenario: str, trial_index: int) -> int:
@@ -58,7 +58,7 @@ def derive_seed(base_seed: int, scenario: str, trial_index: int) -> int:
     return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
 
 
-def plan_trials(campaign: CampaignSpec, scenarios: list[ResolvedScenario], *, sitl: SitlOptions | None = None,
+def plan_trials(campaign: CampaignSpec, scenarios: list[ResolvedScenario], *, runtime: Runtime = EmbeddedRuntime(),
                 outcomes_only: bool = False) -> Iterator[TrialJob]:
     """Every trial of the campaign, scenario by scenario (made one at a time: a campaign of 100,000 trials
     is never held as 100,000 jobs)."""
@@ -66,7 +66,7 @@ def plan_trials(campaign: CampaignSpec, scenarios: list[ResolvedScenario], *, si
         for i in range(s.trials):
             yield TrialJob(campaign=campaign.name, scenario=s.spec.label, scenario_index=s.index, trial_index=i,
                            seed=derive_seed(campaign.base_seed, s.spec.label, i), spec_hash=s.spec_hash,
-                           mission=s.mission, takeoff_altitude_rel_m=s.takeoff_altitude_rel_m, sitl=sitl,
+                           mission=s.mission, takeoff_altitude_rel_m=s.takeoff_altitude_rel_m, runtime=runtime,
                            outcomes_only=outcomes_only)
 
 
@@ -85,22 +85,19 @@ def _downsample(trajectory) -> tuple[tuple[float, ...], ...]:
 
 
 def run_job(job: TrialJob) -> TrialRecord:
-    """Fly one trial (in a worker process or a cluster task). Never raises: a failure becomes an `error`
-    outcome. A SITL trial without a binary of its own uses $PRELAND_SITL_BINARY of the machine it runs on."""
+    """Fly one trial on the job's runtime (in a worker process or a cluster task). Never raises: a failure
+    becomes an `error` outcome. A SITL trial without a binary of its own uses $PRELAND_SITL_BINARY of the
+    machine it runs on."""
     started = time.perf_counter()
     common = dict(campaign=job.campaign, scenario=job.scenario, scenario_index=job.scenario_index,
                   trial_index=job.trial_index, seed=job.seed, spec_hash=job.spec_hash)
     request = TrialRequest(mission=job.mission, seed=job.seed, takeoff_altitude_rel_m=job.takeoff_altitude_rel_m,
                            record_trajectory=not job.outcomes_only)
-    runtime = "sitl" if job.sitl is not None else "embedded"
+    runtime = job.runtime.name
     try:
-        if job.sitl is not None:
-            from ..runtime.sitl import run_sitl_trial
-
-            tlog_name = f"{job.campaign}_s{job.scenario_index}_t{job.trial_index}.tlog"
-            outcome = run_sitl_trial(request, options=job.sitl.on_this_machine(), tlog_name=tlog_name)
-        else:
-            outcome = run_trial(request)
+        # A runtime sent without a binary of its own finds it on the machine the trial runs on.
+        outcome = job.runtime.on_this_machine().fly(
+            request, tlog_name=f"{job.campaign}_s{job.scenario_index}_t{job.trial_index}.tlog")
     except Exception as error:  # a bug in a trial is that trial's outcome; the campaign goes on
         last = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
         where = f" at {Path(last.filename).name}:{last.lineno}" if last else ""
@@ -126,5 +123,5 @@ def error_record(job: TrialJob, message: str, *, wall_time_s: float | None = Non
                        trial_index=job.trial_index, seed=job.seed, spec_hash=job.spec_hash,
                        result={"outcome": Outcome.ERROR.value, "message": message, "mission": job.mission.name,
                                "land_mode": job.mission.land.mode, "details": {}},
-                       runtime="sitl" if job.sitl is not None else "embedded", source=job.source,
+                       runtime=job.runtime.name, source=job.source,
                        wall_time_s=wall_time_s)

@@ -172,12 +172,6 @@ def _root(
 ) -> None:
     """Automated precision-landing missions for multirotor drones."""
 
-def check_sitl_speedup(sitl_speedup: float | None) -> None:
-    """--sitl-speedup: None (preland's choice) or within 0.1..1000."""
-    if sitl_speedup is not None and not 0.1 <= sitl_speedup <= 1000:
-        raise fail(f"--sitl-speedup: must be within 0.1..1000, got {sitl_speedup:g}")
-
-
 def open_store(db: Path, *, must_exist: bool):
     from ..campaign.store import ResultsStore
 

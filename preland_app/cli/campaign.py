@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 
 from ..errors import PrelandError
-from .app import EXIT_FAILED, app, check_sitl_speedup, choices, fail, open_store, progress_bar
+from .app import EXIT_FAILED, app, choices, fail, progress_bar
 
 
 def _executor_names() -> list[str]:
@@ -35,17 +35,31 @@ def campaign_run(
     resume: bool = typer.Option(False, "--resume", help="Finish a campaign already in --db; no trial runs twice."),
     report: Optional[Path] = typer.Option(None, "--report", help="Write the campaign's report to this folder."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+    runtime: Optional[str] = typer.Option(
+        None, "--runtime", metavar="URL",
+        help="Where every trial flies (default: the campaign file's runtime:, else sim:): sim:, sitl:PATH "
+             "(?speedup=X&defaults=A.parm), or a vehicle over MAVLink, mavlink+udp://:14550, "
+             "mavlink+udpout://HOST:PORT, mavlink+tcp://HOST:PORT, mavlink+serial:///dev/DEVICE?baud=N "
+             "(its trials one after another)."),
     sitl: Optional[str] = typer.Option(None, "--sitl", metavar="PATH",
-                                       help="Run each trial on a fresh ArduPilot SITL process (arducopter binary, "
-                                            "or $PRELAND_SITL_BINARY when given empty)."),
+                                       help="Shorthand for --runtime sitl:PATH: each trial on a fresh ArduPilot SITL "
+                                            "process (given empty: $PRELAND_SITL_BINARY)."),
     sitl_speedup: Optional[float] = typer.Option(
-        None, "--sitl-speedup", help="SITL --speedup (default: 2 for land modes that read camera frames, so the "
-                                     "companion keeps the camera's rate; 10 for the others)."),
-    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="More ArduPilot parameter defaults "
-                                             "files, repeatable, applied after the copter defaults (copter.parm "
-                                             "of the binary's ArduPilot tree, else preland's own)."),
-    tlog_dir: Optional[Path] = typer.Option(None, "--tlog-dir", help="With --sitl: one MAVLink telemetry log "
-                                            "(.tlog) per trial in this folder."),
+        None, "--sitl-speedup", rich_help_panel="SITL runtime (sitl:PATH)",
+        help="SITL --speedup (default: 2 for land modes that read camera frames, so the companion keeps the "
+             "camera's rate; 10 for the others)."),
+    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", rich_help_panel="SITL runtime (sitl:PATH)",
+                                             help="More ArduPilot parameter defaults files, repeatable, applied "
+                                                  "after the copter defaults (copter.parm of the binary's "
+                                                  "ArduPilot tree, else preland's own)."),
+    tlog_dir: Optional[Path] = typer.Option(None, "--tlog-dir", rich_help_panel="SITL runtime (sitl:PATH)",
+                                            help="SITL and MAVLink: one MAVLink telemetry log (.tlog) per trial in "
+                                                 "this folder."),
+    no_truth: bool = typer.Option(False, "--no-truth", rich_help_panel="MAVLink runtime (mavlink+..., a vehicle)",
+                                  help="The vehicle reports no ground truth (a real drone)."),
+    no_preflight: bool = typer.Option(False, "--no-preflight",
+                                      rich_help_panel="MAVLink runtime (mavlink+..., a vehicle)",
+                                      help="Skip the preflight checks before each trial."),
     executor: Executor = typer.Option("local", "--executor", help="Where trials run: local (worker processes "
                                       "on this machine), ray (tasks of a Ray cluster) or a registered one."),
     ray_address: Optional[str] = typer.Option(None, "--ray-address", metavar="ADDR",
@@ -56,20 +70,22 @@ def campaign_run(
     outcomes_only: bool = typer.Option(False, "--outcomes-only", help="Store only each trial's outcome row: no "
                                        "event log, no trajectory (a much smaller store)."),
 ) -> None:
-    """Run every trial of a campaign (embedded simulator, or SITL with --sitl), storing each as it finishes."""
+    """Run every trial of a campaign on its runtime (the embedded simulator by default, SITL, or one vehicle
+    over MAVLink), storing each as it finishes."""
     import time
 
-    from ..campaign.driver import CampaignInterrupted, run_campaign
-    from ..campaign.executors import ExecutorError, ExecutorOptions, create_executor, executor_factory
+    from .. import api
+    from ..campaign.driver import CampaignInterrupted
+    from ..campaign.executors import ExecutorError, executor_factory
     from ..campaign.lease import CampaignBusy
-    from ..campaign.report import write_report
     from ..campaign.spec import load_campaign
+    from ..runtime.base import RuntimeOptionError
+    from .fly import choose_runtime, runtime_option_line
 
     try:
         campaign = load_campaign(campaign_file)
     except PrelandError as error:
         raise fail(str(error)) from None
-    check_sitl_speedup(sitl_speedup)
     if workers is not None and workers < 1:
         raise fail(f"--workers: must be >= 1, got {workers}")
     if not trial_cpus > 0:
@@ -80,26 +96,14 @@ def campaign_run(
         raise fail(f"--executor: {error}") from None
     if executor == "local" and (ray_address is not None or trial_cpus != 1.0):
         raise fail(f"--{'ray-address' if ray_address is not None else 'trial-cpus'}: needs --executor ray")
-    sitl_options = None
-    if sitl is not None:
-        from ..runtime.sitl import SitlOptions, resolve_sitl_binary
-
-        try:
-            # Trials on other machines find the binary there: the path given, else each node's own
-            # $PRELAND_SITL_BINARY; on this machine it is checked now.
-            binary = ((Path(sitl) if sitl else None) if getattr(factory, "runs_elsewhere", False)
-                      else resolve_sitl_binary(sitl or None))
-            sitl_options = SitlOptions(binary=binary, speedup=sitl_speedup,
-                                       defaults=tuple(p.resolve() for p in sitl_defaults),
-                                       tlog_dir=tlog_dir.resolve() if tlog_dir else None)
-        except PrelandError as error:
-            raise fail(f"--sitl: {error}") from None
-    try:
-        trial_executor = create_executor(executor, ExecutorOptions(workers=workers, address=ray_address,
-                                                                   trial_cpus=trial_cpus))
-    except ExecutorError as error:
-        raise fail(f"--executor {executor}: {error}") from None
-    store = open_store(db, must_exist=False)
+    given = {"speedup": sitl_speedup, "defaults": tuple(p.resolve() for p in sitl_defaults) or None,
+             "tlog_dir": str(tlog_dir.resolve()) if tlog_dir else None, "truth": False if no_truth else None,
+             "preflight": False if no_preflight else None}
+    options = {name: value for name, value in given.items() if value is not None}
+    chosen = choose_runtime(runtime if runtime is not None or sitl is not None else campaign.runtime,
+                            connect=None, sitl=sitl, options=options) \
+        if not getattr(factory, "runs_elsewhere", False) else None
+    url = chosen.url if chosen is not None else api.runtime_url(runtime, sitl=sitl)
     started = time.perf_counter()
     failures: list[str] = []
     try:
@@ -109,26 +113,25 @@ def campaign_run(
                 if record is not None and record.result.get("outcome") == "error":
                     failures.append(f"{record.scenario} #{record.trial_index}: {record.result.get('message')}")
 
-            ran, total = run_campaign(campaign, store, resume=resume, progress=progress, sitl=sitl_options,
-                                      executor=trial_executor, outcomes_only=outcomes_only)
+            run = api.run_campaign(campaign, db=db, workers=workers, resume=resume, runtime=url, options=options,
+                                   progress=progress, executor=executor, ray_address=ray_address,
+                                   trial_cpus=trial_cpus, outcomes_only=outcomes_only)
     except CampaignInterrupted as error:
-        store.close()
         typer.echo(f"preland: {error}", err=True)
         raise typer.Exit(130) from None
     except CampaignBusy as error:
-        store.close()
         raise fail(str(error), code=EXIT_FAILED) from None
+    except RuntimeOptionError as error:
+        raise fail(runtime_option_line(error)) from None
     except ExecutorError as error:
-        store.close()
         raise fail(f"--executor {executor}: {error}") from None
     except PrelandError as error:
-        store.close()
         raise fail(str(error)) from None
+    ran, total = run.ran, run.total
     elapsed = time.perf_counter() - started
     typer.echo(f"campaign {campaign.name}: {ran} trial(s) run, {total} in {db} ({elapsed:.1f} s)")
     for line in failures:
         typer.echo(f"  trial failed: {line}", err=True)
     if report is not None:
-        for path in write_report(store, campaign.name, report):
+        for path in api.write_campaign_report(db, campaign.name, report):
             typer.echo(f"wrote {path}")
-    store.close()

@@ -1,4 +1,5 @@
-"""preland fly: one mission, on the embedded simulator, SITL or a vehicle over MAVLink."""
+"""preland fly: one mission, on any runtime (the embedded simulator, SITL, a vehicle over MAVLink), through the
+Python API's `fly`."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from typing import Optional
 import typer
 
 from ..errors import PrelandError
-from .app import EXIT_FAILED, app, check_sitl_speedup, choices, fail
+from .app import EXIT_FAILED, app, choices, fail
 from ..landing.registry import LAND_MODES, PRECISION_SENSORS
 
 PrecisionSensor = choices(lambda: PRECISION_SENSORS)
@@ -42,16 +43,17 @@ def _format_outcome_table(data: dict) -> str:
     return "\n".join(f"{label:<{width}}  {value}" for label, value in rows)
 
 
-def _with_wind(mission, *, wind_m_s: float | None, wind_from_deg: float | None, connect: str | None):
-    """The mission with the command line's wind; refused over MAVLink, where the weather is the real one."""
+def _with_wind(mission, *, wind_m_s: float | None, wind_from_deg: float | None, runtime):
+    """The mission with the command line's wind; refused where the weather is the real one (a vehicle)."""
     import math
     from dataclasses import replace
 
     if wind_m_s is None and wind_from_deg is None:
         return mission
     option = "--wind-m-s" if wind_m_s is not None else "--wind-from-deg"
-    if connect is not None:
-        raise fail(f"{option}: only for the embedded simulator and SITL (with --connect the wind is the real one)")
+    if not runtime.simulated_world:
+        raise fail(f"{option}: only where preland simulates the world (sim:, sitl:), not on {runtime.url}, "
+                   "where the wind is the real one")
     if wind_m_s is not None and not (math.isfinite(wind_m_s) and 0.0 <= wind_m_s <= 30.0):
         raise fail(f"--wind-m-s: must be within 0..30 m/s, got {wind_m_s:g}")
     if wind_from_deg is not None and not (math.isfinite(wind_from_deg) and 0.0 <= wind_from_deg <= 360.0):
@@ -81,6 +83,39 @@ def _parse_faults(values: list[str]) -> dict[str, str]:
     return faults
 
 
+SIM_PANEL = "Embedded simulator and SITL (simulated world)"
+SITL_PANEL = "SITL runtime (sitl:PATH)"
+MAVLINK_PANEL = "MAVLink runtime (mavlink+..., a vehicle)"
+# The command line's name of each runtime option, for one-line refusals.
+OPTION_FLAGS = {"speedup": "--sitl-speedup", "defaults": "--sitl-defaults", "tlog_dir": "--tlog",
+                "fault_listen": "--fault-listen", "truth": "--no-truth", "preflight": "--no-preflight",
+                "camera_source": "--camera", "detection_log": "--detections-log", "video_path": "--record-video"}
+
+
+def runtime_option_line(error) -> str:
+    """A RuntimeOptionError as the command line names the option."""
+    return f"{OPTION_FLAGS.get(error.option, '--' + error.option.replace('_', '-'))}: {error.problem}"
+
+
+def choose_runtime(runtime: str | None, *, connect: str | None, sitl: str | None, options: dict):
+    """The runtime the command line names (`--runtime`, or a shorthand), with the options given; one line
+    and exit 2 for an unknown URL or an option that does not apply."""
+    from ..api import runtime_url
+    from ..runtime.base import RuntimeOptionError, open_runtime
+
+    given = [flag for flag, value in (("--runtime", runtime), ("--connect", connect), ("--sitl", sitl))
+             if value is not None]
+    if len(given) > 1:
+        raise fail(f"{given[1]}: give one of --runtime, --connect and --sitl (got {' and '.join(given)})")
+    try:
+        # On this machine: a SITL binary that cannot be run is bad input, refused before anything flies.
+        return open_runtime(runtime_url(runtime, connect=connect, sitl=sitl), options).on_this_machine()
+    except RuntimeOptionError as error:
+        raise fail(runtime_option_line(error)) from None
+    except PrelandError as error:
+        raise fail(f"{given[0] if given else '--runtime'}: {error}") from None
+
+
 @app.command()
 def fly(
     mission_file: Path = typer.Argument(..., metavar="MISSION", help="Mission YAML file (see missions/)."),
@@ -95,55 +130,68 @@ def fly(
                                          "periodic:KEEP:DROP, permanent, below:H, above:H; add :first-attempt "
                                          "to limit it to the first landing attempt. E.g. marker=below:3."),
     seed: int = typer.Option(1, "--seed", help="Trial seed: same seed, same outcome."),
-    wind_m_s: Optional[float] = typer.Option(None, "--wind-m-s", help="Steady wind speed in m/s, overriding the "
-                                             "mission's environment (embedded simulator and SITL)."),
-    wind_from_deg: Optional[float] = typer.Option(None, "--wind-from-deg", help="Where the wind blows from, deg "
-                                                  "clockwise from north (default: the mission's, else drawn per "
-                                                  "seed)."),
     takeoff_altitude_m: Optional[float] = typer.Option(
         None, "--takeoff-altitude-m", help="Take-off altitude above home in m, overriding the mission's."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
     events: bool = typer.Option(False, "--events", help="Include the mission's event log."),
+    runtime: Optional[str] = typer.Option(
+        None, "--runtime", metavar="URL",
+        help="Where to fly: sim: (default, the embedded simulator), sitl:PATH (sitl: for $PRELAND_SITL_BINARY; "
+             "?speedup=X&defaults=A.parm), mavlink+udp://:14550, mavlink+udpout://HOST:PORT, "
+             "mavlink+tcp://HOST:PORT, mavlink+serial:///dev/ttyAMA0?baud=921600."),
     connect: Optional[str] = typer.Option(
         None, "--connect", metavar="URL",
-        help="Fly over MAVLink instead of the embedded simulator: udp://:14550, udpout://127.0.0.1:14550, "
-             "tcp://127.0.0.1:5760, serial:///dev/ttyAMA0:921600."),
-    no_truth: bool = typer.Option(False, "--no-truth",
-                                  help="With --connect: the vehicle reports no ground truth (a real drone)."),
+        help="Shorthand for --runtime mavlink+URL: udp://:14550, udpout://127.0.0.1:14550, tcp://127.0.0.1:5760, "
+             "serial:///dev/ttyAMA0:921600."),
     sitl: Optional[str] = typer.Option(None, "--sitl", metavar="PATH",
-                                       help="Fly on a fresh ArduPilot SITL process (arducopter binary; "
-                                            "default $PRELAND_SITL_BINARY when --sitl is given empty)."),
+                                       help="Shorthand for --runtime sitl:PATH (a fresh ArduPilot SITL process; "
+                                            "given empty: $PRELAND_SITL_BINARY)."),
+    wind_m_s: Optional[float] = typer.Option(None, "--wind-m-s", rich_help_panel=SIM_PANEL,
+                                             help="Steady wind speed in m/s, overriding the mission's environment."),
+    wind_from_deg: Optional[float] = typer.Option(None, "--wind-from-deg", rich_help_panel=SIM_PANEL,
+                                                  help="Where the wind blows from, deg clockwise from north "
+                                                       "(default: the mission's, else drawn per seed)."),
     sitl_speedup: Optional[float] = typer.Option(
-        None, "--sitl-speedup", help="SITL --speedup (default: 2 for land modes that read camera frames, so the "
-                                     "companion keeps the camera's rate; 10 for the others)."),
-    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", help="More ArduPilot parameter defaults "
-                                             "files, repeatable, applied after the copter defaults (copter.parm "
-                                             "of the binary's ArduPilot tree, else preland's own)."),
-    tlog: Optional[Path] = typer.Option(None, "--tlog", help="With --connect or --sitl: write a MAVLink "
-                                        "telemetry log (.tlog) of the trial."),
-    camera_source: Optional[str] = typer.Option(None, "--camera", metavar="SRC",
-                                                help="With --connect: a real camera (index, device, GStreamer "
-                                                     "pipeline) or a video file instead of the virtual camera."),
-    no_preflight: bool = typer.Option(False, "--no-preflight", help="With --connect: skip the preflight checks."),
-    detections_log: Optional[Path] = typer.Option(None, "--detections-log",
-                                                  help="With --connect: keep every detection in this CSV."),
-    record_video: Optional[Path] = typer.Option(None, "--record-video",
-                                                help="With --connect: keep the camera's frames in this video."),
-    record_to: Optional[Path] = typer.Option(None, "--record-to", metavar="DB",
-                                             help="With --connect: after landing, ask for the measured result and "
-                                                  "store it (as `preland trial record`) in this results database."),
-    campaign_name: Optional[str] = typer.Option(None, "--campaign", help="With --record-to: the campaign."),
-    scenario_label: Optional[str] = typer.Option(None, "--scenario", help="With --record-to: the scenario."),
-    record_new: bool = typer.Option(False, "--new", help="With --record-to: the campaign or scenario may be new "
-                                    "(else it must be in the database, checked before take-off)."),
-    fault_listen: Optional[str] = typer.Option(None, "--fault-listen", metavar="URL",
-                                               help="With --connect or --sitl: take fault commands (preland fault send) "
+        None, "--sitl-speedup", rich_help_panel=SITL_PANEL,
+        help="SITL --speedup (default: 2 for land modes that read camera frames, so the companion keeps the "
+             "camera's rate; 10 for the others)."),
+    sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", rich_help_panel=SITL_PANEL,
+                                             help="More ArduPilot parameter defaults files, repeatable, applied "
+                                                  "after the copter defaults (copter.parm of the binary's ArduPilot "
+                                                  "tree, else preland's own)."),
+    tlog: Optional[Path] = typer.Option(None, "--tlog", rich_help_panel=SITL_PANEL,
+                                        help="SITL and MAVLink: write a MAVLink telemetry log (.tlog) of the trial."),
+    fault_listen: Optional[str] = typer.Option(None, "--fault-listen", metavar="URL", rich_help_panel=SITL_PANEL,
+                                               help="SITL and MAVLink: take fault commands (preland fault send) "
                                                     "on this UDP address, e.g. udp://127.0.0.1:14560."),
+    no_truth: bool = typer.Option(False, "--no-truth", rich_help_panel=MAVLINK_PANEL,
+                                  help="The vehicle reports no ground truth (a real drone)."),
+    camera_source: Optional[str] = typer.Option(None, "--camera", metavar="SRC", rich_help_panel=MAVLINK_PANEL,
+                                                help="A real camera (index, device, GStreamer pipeline) or a video "
+                                                     "file instead of the virtual camera."),
+    no_preflight: bool = typer.Option(False, "--no-preflight", rich_help_panel=MAVLINK_PANEL,
+                                      help="Skip the preflight checks."),
+    detections_log: Optional[Path] = typer.Option(None, "--detections-log", rich_help_panel=MAVLINK_PANEL,
+                                                  help="Keep every detection in this CSV."),
+    record_video: Optional[Path] = typer.Option(None, "--record-video", rich_help_panel=MAVLINK_PANEL,
+                                                help="Keep the camera's frames in this video."),
+    record_to: Optional[Path] = typer.Option(None, "--record-to", metavar="DB", rich_help_panel=MAVLINK_PANEL,
+                                             help="After landing, ask for the measured result and store it (as "
+                                                  "`preland trial record`) in this results database."),
+    campaign_name: Optional[str] = typer.Option(None, "--campaign", rich_help_panel=MAVLINK_PANEL,
+                                                help="With --record-to: the campaign."),
+    scenario_label: Optional[str] = typer.Option(None, "--scenario", rich_help_panel=MAVLINK_PANEL,
+                                                 help="With --record-to: the scenario."),
+    record_new: bool = typer.Option(False, "--new", rich_help_panel=MAVLINK_PANEL,
+                                    help="With --record-to: the campaign or scenario may be new (else it must be "
+                                         "in the database, checked before take-off)."),
 ) -> None:
-    """Fly a mission once (on the embedded simulator, or over MAVLink) and print its outcome."""
+    """Fly a mission once (on the embedded simulator, ArduPilot SITL or a vehicle over MAVLink) and print its
+    outcome."""
+    from .. import api
     from ..config.mission import load_mission
     from ..errors import SpecValueError
-    from ..runtime.embedded import TrialRequest, run_trial
+    from ..runtime.base import RuntimeOptionError
 
     try:
         mission = load_mission(mission_file)
@@ -151,55 +199,45 @@ def fly(
         raise fail(str(error)) from None
     if takeoff_altitude_m is not None and not 0.0 < takeoff_altitude_m <= 120.0:
         raise fail(f"--takeoff-altitude-m: must be > 0 and <= 120 m, got {takeoff_altitude_m:g}")
-    check_sitl_speedup(sitl_speedup)
     if seed < 0:
         raise fail(f"--seed: must be >= 0, got {seed}")
-    mission = _with_wind(mission, wind_m_s=wind_m_s, wind_from_deg=wind_from_deg, connect=connect)
+    given = {"speedup": sitl_speedup, "defaults": tuple(p.resolve() for p in sitl_defaults) or None,
+             "tlog_dir": str(tlog.parent) if tlog else None, "fault_listen": fault_listen,
+             "truth": False if no_truth else None, "preflight": False if no_preflight else None,
+             "camera_source": camera_source, "detection_log": str(detections_log) if detections_log else None,
+             "video_path": str(record_video) if record_video else None}
+    chosen = choose_runtime(runtime, connect=connect, sitl=sitl,
+                            options={name: value for name, value in given.items() if value is not None})
+    mission = _with_wind(mission, wind_m_s=wind_m_s, wind_from_deg=wind_from_deg, runtime=chosen)
+    if record_to is not None and chosen.name != "mavlink":
+        raise fail(f"--record-to: only for a vehicle over MAVLink (mavlink+... runtimes), not {chosen.url}")
+    for flag, value in (("--campaign", campaign_name), ("--scenario", scenario_label), ("--new", record_new or None)):
+        if value is not None and record_to is None:
+            raise fail(f"{flag}: only with --record-to")
     faults = _parse_faults(fault) if fault else None
-    request = TrialRequest(mission=mission, seed=seed, land_mode=land, sensor=sensor, faults=faults,
-                           takeoff_altitude_rel_m=takeoff_altitude_m, record_trajectory=False)
     try:
-        request.resolved_mission()
+        api.trial_request(mission, seed=seed, land=land, sensor=sensor, faults=faults,
+                          takeoff_altitude_m=takeoff_altitude_m, record_trajectory=False)
     except SpecValueError as error:
         option = {"sensor": "--sensor", "mode": "--land"}.get(error.field.split(".")[0], "--fault")
         if error.field.startswith("params"):  # a plugin's options: the mission's land.params do not fit it
             raise fail(f"--land {land}: land.{error.field}: {error.problem}") from None
         raise fail(f"{option}: {error.problem}") from None
-
-    if sitl is not None:
-        from ..runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial
-
-        try:
-            binary = resolve_sitl_binary(sitl or None)
-        except PrelandError as error:  # a missing binary is bad input, as for `campaign run --sitl`
-            raise fail(f"--sitl: {error}") from None
-        options = SitlOptions(binary=binary, speedup=sitl_speedup, defaults=tuple(sitl_defaults),
-                              tlog_dir=tlog.parent if tlog else None, fault_listen=fault_listen)
-        try:
-            outcome = run_sitl_trial(request, options=options, tlog_name=tlog.name if tlog else None)
-        except PrelandError as error:
-            raise fail(f"--sitl: {error}", code=EXIT_FAILED) from None
-        except KeyboardInterrupt:
-            raise fail("interrupted", code=130) from None
-    elif connect is not None:
-        from ..runtime.mavlink import run_mavlink_trial
-
-        try:
-            if record_to is not None and (not campaign_name or not scenario_label):
-                raise fail("--record-to needs --campaign and --scenario")
-            if record_to is not None and not record_new:
-                _check_record_target(record_to, campaign_name, scenario_label)
-            outcome = run_mavlink_trial(request, url=connect, truth=not no_truth,
-                                        tlog_path=str(tlog) if tlog else None, fault_listen=fault_listen,
-                                        preflight=not no_preflight, camera_source=camera_source,
-                                        detection_log=str(detections_log) if detections_log else None,
-                                        video_path=str(record_video) if record_video else None)
-        except PrelandError as error:
-            raise fail(f"--connect {connect}: {error}", code=EXIT_FAILED) from None
-        except KeyboardInterrupt:
-            raise fail("interrupted", code=130) from None
-    else:
-        outcome = run_trial(request)
+    if record_to is not None and (not campaign_name or not scenario_label):
+        raise fail("--record-to needs --campaign and --scenario")
+    if record_to is not None and not record_new:
+        _check_record_target(record_to, campaign_name, scenario_label)
+    try:
+        outcome = api.fly(mission, seed=seed, land=land, sensor=sensor, faults=faults,
+                          takeoff_altitude_m=takeoff_altitude_m, record_trajectory=False, runtime=chosen.url,
+                          options={name: value for name, value in given.items() if value is not None},
+                          tlog_name=tlog.name if tlog else None)
+    except RuntimeOptionError as error:
+        raise fail(runtime_option_line(error)) from None
+    except PrelandError as error:
+        raise fail(f"{chosen.url}: {error}", code=EXIT_FAILED) from None
+    except KeyboardInterrupt:
+        raise fail("interrupted", code=130) from None
     data = outcome.to_dict(include_events=events)
     failures = outcome.details.get("preflight_failures") or []
     if failures:
@@ -214,7 +252,7 @@ def fly(
             typer.echo("")
             for event in data["events"]:
                 typer.echo(f"{event['time_s']:8.2f} s  {event['kind']:<13} {event['message']}")
-    if connect is not None and record_to is not None and outcome.outcome.value == "landed":
+    if record_to is not None and outcome.outcome.value == "landed":
         _prompt_and_record(record_to, campaign_name, scenario_label, outcome.land_mode,
                            outcome.takeoff_altitude_rel_m, new=record_new)
     if outcome.outcome.value != "landed":

@@ -20,6 +20,7 @@ from pathlib import Path
 from pymavlink.generator import mavcrc, mavparse
 
 from ..errors import PrelandError
+from .endpoint import EndpointError, parse_endpoint
 from ..sensing.faults import FaultCommand, FaultSyntaxError
 
 DIALECT = Path(__file__).with_name("preland.xml")
@@ -106,12 +107,15 @@ def _fields(name: str, frame: bytes) -> dict | None:
 
 
 def _address(url: str) -> tuple[str, int]:
-    """`udp:HOST:PORT`, `udpout://HOST:PORT` or `udp://HOST:PORT` -> (host, port)."""
-    rest = url.split("://", 1)[1] if "://" in url else url.partition(":")[2]
-    host, _, port = rest.rpartition(":")
-    if not port.isdigit():
-        raise FaultMessageError(f"{url!r}: expected udp://HOST:PORT")
-    return host or "127.0.0.1", int(port)
+    """Any UDP form `parse_endpoint` reads (`udp://HOST:PORT`, `udp:HOST:PORT`, `mavlink+udp://...`) ->
+    (host, port)."""
+    try:
+        endpoint = parse_endpoint(url)
+    except EndpointError:
+        raise FaultMessageError(f"{url!r}: expected udp://HOST:PORT") from None
+    if endpoint.kind not in ("udp", "udpout"):
+        raise FaultMessageError(f"{url!r}: expected udp://HOST:PORT (the fault command travels over UDP)")
+    return endpoint.host_port()
 
 
 def send(command: FaultCommand, *, url: str, ack_timeout_s: float | None = ACK_TIMEOUT_S) -> int | None:

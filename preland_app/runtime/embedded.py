@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-import math
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from ..clock import LoopClock, run_virtual
 from ..config.mission import MissionSpec
@@ -17,34 +15,38 @@ from ..outcome import Outcome, TrialOutcome, outcome_for_error, score_touchdown
 from ..sim.noise import child_rng
 from ..sim.simulator import Simulator
 from ..vehicle.sim_backend import SimVehicle
-from ..sensing.irlock import IrLockModel
-from ..sensing.marker import TrackingMarkerDetector, detector_parameters
-from ..sensing.sources import IrLockSource, VirtualFrameSource
-from ..sensing.suite import SensorSuite
-from ..sensing.virtual_camera import CameraPose, VirtualCamera
+from ..sensing.virtual_camera import CameraPose
+from .base import RuntimeUrlError, TrialRequest, no_options
+from .sensors import build_sensor_suite
 from .recorder import TrajectoryRecorder
 
 
 
-@dataclass(frozen=True, kw_only=True)
-class TrialRequest:
-    """One trial: a mission, a seed, and optional overrides of its land mode (a name or an import path),
-    the plugin's options (`land_params`), sensor, faults (sensor -> fault syntax) and take-off altitude."""
+@dataclass(frozen=True)
+class EmbeddedRuntime:
+    """The embedded simulator (`sim:`): virtual time, ground truth, the same outcome for the same seed."""
 
-    mission: MissionSpec
-    seed: int
-    land_mode: str | None = None
-    sensor: str | None = None
-    faults: dict[str, str] | None = None
-    takeoff_altitude_rel_m: float | None = None
-    record_trajectory: bool = True
-    land_params: dict[str, Any] | None = None
+    scheme: ClassVar[str] = "sim"
+    name: ClassVar[str] = "embedded"
+    source: ClassVar[str] = "sim"
+    simulated_world: ClassVar[bool] = True
+    max_workers: ClassVar[int | None] = None
+    cluster_resource: ClassVar[str | None] = None
+    url: ClassVar[str] = "sim:"
 
-    def resolved_mission(self) -> MissionSpec:
-        if self.land_mode is None and self.sensor is None and self.faults is None and self.land_params is None:
-            return self.mission
-        return self.mission.with_land(mode=self.land_mode, sensor=self.sensor, faults=self.faults,
-                                      params=self.land_params)
+    @classmethod
+    def from_url(cls, *, target: str, query: dict[str, str], options: dict[str, Any]) -> "EmbeddedRuntime":
+        if target or query:
+            raise RuntimeUrlError(f"sim:{target}{'?' if query else ''}: the embedded simulator takes no path or "
+                                  "options (write sim:)")
+        no_options({**options}, runtime="sim:")
+        return cls()
+
+    def fly(self, request: TrialRequest, *, tlog_name: str | None = None) -> TrialOutcome:
+        return run_trial(request)
+
+    def on_this_machine(self) -> "EmbeddedRuntime":
+        return self
 
 
 def run_trial(request: TrialRequest) -> TrialOutcome:
@@ -91,36 +93,6 @@ async def fly_embedded(request: TrialRequest) -> TrialOutcome:
                   outcome=outcome, message=message, scoring=strategy.scoring_reference,
                   takeoff_altitude_rel_m=runner.takeoff_altitude_rel_m,
                   trajectory=recorder.array() if request.record_trajectory else None)
-
-
-def build_sensor_suite(*, mission: MissionSpec, seed: int, true_pose: Callable[[], CameraPose], clock,
-                       camera: bool, irlock: bool, pose_time_s: Callable[[], float] | None = None) -> SensorSuite:
-    """The companion's simulated sensors: they see the world through `true_pose` (NED from the start
-    position, from the embedded simulator or from SITL's SIM_STATE); what they give is images and readings.
-    `pose_time_s`: the vehicle time (s) of the pose `true_pose` gives, which stamps the readings; None when
-    the pose is always the clock's present (the embedded simulator)."""
-    spec = mission.sensors
-    suite = SensorSuite(spec=spec)
-    if not (camera or irlock):
-        return suite
-    pad = mission.pad_spec()
-    pad_origin = mission.pad.offset_from_start_ned_m
-
-    if camera:
-        model = spec.camera.model(relative_to=mission.base_dir)
-        renderer = VirtualCamera(camera=model, pad=pad, pad_origin_ned_m=pad_origin, pad_yaw_deg=mission.pad.yaw_deg,
-                                 rng=child_rng(seed, "camera"), effects=spec.camera.effects())
-        suite.camera = VirtualFrameSource(renderer=renderer, pose=true_pose, clock=clock, pose_time_s=pose_time_s)
-        suite.marker_detector = TrackingMarkerDetector(pad=pad, camera=model,
-                                                       parameters=detector_parameters(spec.marker.detector))
-    if irlock and pad.beacon_m is not None:
-        yaw = math.radians(mission.pad.yaw_deg)
-        bn, be = pad.beacon_m
-        beacon = (pad_origin[0] + bn * math.cos(yaw) - be * math.sin(yaw),
-                  pad_origin[1] + bn * math.sin(yaw) + be * math.cos(yaw))
-        model_ir = IrLockModel(spec=spec.irlock, beacon_ned_m=beacon, rng=child_rng(seed, "irlock"))
-        suite.irlock = IrLockSource(model=model_ir, pose=true_pose, clock=clock, pose_time_s=pose_time_s)
-    return suite
 
 
 def _score(*, request: TrialRequest, mission: MissionSpec, simulator: Simulator, report: MissionReport,

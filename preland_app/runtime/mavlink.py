@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Awaitable, Callable, Sequence
-from typing import TypeVar
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, TypeVar
 
 from ..errors import PrelandError
 from ..events import EventLog
@@ -22,6 +24,7 @@ from ..landing.base import ScoringReference
 from ..landing.precision import PrecisionLanding
 from ..sensing.logging import LoggingDetector, RecordingFrameSource
 from ..sensing.marker import TrackingMarkerDetector, detector_parameters
+from ..mavlink.endpoint import Endpoint, parse_endpoint
 from ..mavlink.fault_message import listen
 from ..sensing.faults import FaultCommand
 from ..mission import MissionRunner
@@ -29,7 +32,8 @@ from ..outcome import Outcome, TrialOutcome, outcome_for_error, score_touchdown
 from ..sensing.virtual_camera import CameraPose
 from ..sim.noise import child_rng
 from ..vehicle.mavlink_backend import MavlinkVehicle
-from .embedded import TrialRequest, build_sensor_suite
+from .base import TrialRequest, build_options
+from .sensors import build_sensor_suite
 from .recorder import TrajectoryRecorder
 
 ON_GROUND_M = 0.05
@@ -244,6 +248,67 @@ def _open_camera(source: str, mission, clock):
 
 def _no_truth() -> CameraPose:
     raise PrelandError("this runtime has no ground truth: simulated sensors cannot be used (use a real camera)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class MavlinkOptions:
+    """How to fly a vehicle over MAVLink. `truth`: the vehicle reports ground truth (SIM_STATE: `sim serve`,
+    SITL; False for a real drone, whose landings the operator measures); `preflight`: run the preflight
+    checks before take-off and refuse it when one fails; `camera_source`: a capture device or video file
+    instead of the virtual camera; `detection_log` (CSV), `video_path`: keep every detection and frame;
+    `tlog_dir`: keep one MAVLink telemetry log per trial there; `fault_listen`: a UDP address for the
+    thesis' fault command during the flight; `link_timeout_s`: vehicle seconds without a HEARTBEAT before
+    the link counts as lost."""
+
+    truth: bool = True
+    preflight: bool = True
+    camera_source: str | None = None
+    detection_log: str | None = None
+    video_path: str | None = None
+    tlog_dir: str | None = None
+    fault_listen: str | None = None
+    link_timeout_s: float = 5.0
+
+
+@dataclass(frozen=True)
+class MavlinkRuntime:
+    """A vehicle over MAVLink (`mavlink+udp://`, `+udpout://`, `+tcp://`, `+serial://`): `preland sim serve`,
+    a SITL already running, or a drone. One vehicle: its trials fly one after another."""
+
+    scheme: ClassVar[str] = "mavlink"
+    name: ClassVar[str] = "mavlink"
+    simulated_world: ClassVar[bool] = False
+    max_workers: ClassVar[int | None] = 1
+    cluster_resource: ClassVar[str | None] = None
+    endpoint: Endpoint
+    options: MavlinkOptions = field(default_factory=MavlinkOptions)
+
+    @property
+    def url(self) -> str:
+        return self.endpoint.url
+
+    @property
+    def source(self) -> str:
+        """`sim` where the vehicle reports ground truth (a simulated one), else `field`."""
+        return "sim" if self.options.truth else "field"
+
+    @classmethod
+    def from_url(cls, *, target: str, query: dict[str, str], options: dict[str, Any]) -> "MavlinkRuntime":
+        return cls(endpoint=parse_endpoint(target), options=build_options(MavlinkOptions, options,
+                                                                          runtime="mavlink+"))
+
+    def fly(self, request: TrialRequest, *, tlog_name: str | None = None) -> TrialOutcome:
+        o = self.options
+        tlog_path = None
+        if o.tlog_dir is not None:
+            tlog_path = str(Path(o.tlog_dir) / (tlog_name or f"{request.mission.name}_seed{request.seed}.tlog"))
+        return run_mavlink_trial(request, url=self.endpoint.url, truth=o.truth, link_timeout_s=o.link_timeout_s,
+                                 tlog_path=tlog_path, fault_listen=o.fault_listen, preflight=o.preflight,
+                                 camera_source=o.camera_source, detection_log=o.detection_log,
+                                 video_path=o.video_path)
+
+    def on_this_machine(self) -> "MavlinkRuntime":
+        return self
 
 
 def run_mavlink_trial(request: TrialRequest, *, url: str, **options) -> TrialOutcome:

@@ -27,15 +27,17 @@ import socket
 import subprocess
 import tempfile
 from dataclasses import dataclass, field, replace
+from typing import Any, ClassVar
 from pathlib import Path
 
 from ..config.mission import MissionSpec
 from ..errors import PrelandError
 from ..outcome import TrialOutcome
-from ..sim.noise import GaussianStream, SmoothGaussMarkov, child_rng
+from ..sim.navigation import gps_drift
+from ..sim.noise import GaussianStream, child_rng
 from ..sim.spec import DEFAULT_HOME, NavigationSpec
 from ..vehicle.mavlink_backend import MavlinkVehicle
-from .embedded import TrialRequest
+from .base import RuntimeOptionError, TrialRequest, build_options
 from .mavlink import fly_mavlink
 
 SITL_ENV = "PRELAND_SITL_BINARY"
@@ -121,6 +123,60 @@ class SitlOptions:
         return replace(self, binary=resolve_sitl_binary(self.binary))
 
 
+SPEEDUP_RANGE = (0.1, 1000.0)
+
+
+@dataclass(frozen=True)
+class SitlRuntime:
+    """ArduPilot SITL (`sitl:PATH`, `sitl:` for $PRELAND_SITL_BINARY; query `speedup=X`,
+    `defaults=A.parm,B.parm`): a fresh `arducopter` process per trial, scored from its SIM_STATE."""
+
+    scheme: ClassVar[str] = "sitl"
+    name: ClassVar[str] = "sitl"
+    source: ClassVar[str] = "sitl"
+    simulated_world: ClassVar[bool] = True
+    max_workers: ClassVar[int | None] = None
+    cluster_resource: ClassVar[str | None] = "sitl"
+    options: SitlOptions
+
+    @property
+    def url(self) -> str:
+        return f"sitl:{self.options.binary or ''}"
+
+    @classmethod
+    def from_url(cls, *, target: str, query: dict[str, str], options: dict[str, Any]) -> "SitlRuntime":
+        values: dict[str, Any] = {}
+        for key, text in query.items():
+            if key == "speedup":
+                try:
+                    values["speedup"] = float(text)
+                except ValueError:
+                    raise RuntimeOptionError(option="speedup", runtime="sitl:",
+                                             problem=f"must be a number, got {text!r}") from None
+            elif key == "defaults":
+                values["defaults"] = tuple(Path(part) for part in text.split(",") if part)
+            else:
+                raise RuntimeOptionError(option=key, runtime="sitl:", takes=("speedup", "defaults"),
+                                         problem="not an option of a sitl: URL")
+        values.update(options)
+        if "binary" in values:
+            raise RuntimeOptionError(option="binary", runtime="sitl:", problem="the binary is the URL's path "
+                                                                               "(sitl:PATH)")
+        chosen = build_options(SitlOptions, {"binary": Path(target).expanduser() if target else None, **values},
+                               runtime="sitl:")
+        if chosen.speedup is not None and not SPEEDUP_RANGE[0] <= chosen.speedup <= SPEEDUP_RANGE[1]:
+            raise RuntimeOptionError(option="speedup", runtime="sitl:",
+                                     problem=f"must be within 0.1..1000, got {chosen.speedup:g}")
+        return cls(options=replace(chosen, defaults=tuple(Path(p).resolve() for p in chosen.defaults),
+                                   tlog_dir=Path(chosen.tlog_dir).resolve() if chosen.tlog_dir else None))
+
+    def fly(self, request: TrialRequest, *, tlog_name: str | None = None) -> TrialOutcome:
+        return run_sitl_trial(request, options=self.options.on_this_machine(), tlog_name=tlog_name)
+
+    def on_this_machine(self) -> "SitlRuntime":
+        return replace(self, options=self.options.on_this_machine())
+
+
 def sim_params(mission: MissionSpec, seed: int) -> dict[str, float]:
     """The scenario's wind as ArduPilot SITL parameters: SIM_WIND_SPD (m/s), SIM_WIND_DIR (deg, from),
     SIM_WIND_T and SIM_WIND_TURB (m/s).
@@ -166,11 +222,7 @@ class GpsErrorDriver:
     added to every GPS fix), every GPS_UPDATE_PERIOD_S vehicle seconds."""
 
     def __init__(self, *, spec: NavigationSpec, seed: int, latitude_deg: float) -> None:
-        noise = GaussianStream(child_rng(seed, "sitl_gps"))
-        self._north = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
-                                        smooth_s=spec.gps_drift_smooth_s, noise=noise)
-        self._east = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
-                                       smooth_s=spec.gps_drift_smooth_s, noise=noise)
+        self._north, self._east = gps_drift(spec, GaussianStream(child_rng(seed, "sitl_gps")))
         self._metres_per_deg_lon = METRES_PER_DEG_LAT * max(math.cos(math.radians(latitude_deg)), 1e-6)
         self.updates = 0
 

@@ -40,6 +40,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from ..clock import Clock
+from ..mavlink.endpoint import EndpointError, parse_endpoint
 from ..errors import CommandDenied, PrelandError
 from ..geo import GeoPoint, LocalTangentPlane
 from ..vehicle.types import FlightMode, LandedState, LandingTarget
@@ -88,13 +89,16 @@ class MavlinkFaceError(PrelandError):
 
 
 def parse_listen(address: str) -> str:
-    """`udp:HOST:PORT` (or `udpin:`) -> pymavlink `udpin:HOST:PORT`; `udpclient:HOST:PORT` (or `udpout:`, as
-    SITL's --serial0 says it) -> pymavlink `udpout:HOST:PORT`, which sends first."""
-    scheme, _, rest = address.partition(":")
-    host, _, port = rest.rpartition(":")
-    if scheme not in ("udp", "udpin", "udpclient", "udpout") or not host or not port.isdigit():
-        raise MavlinkFaceError(f"--listen {address!r}: expected udp:HOST:PORT, e.g. udp:127.0.0.1:14550")
-    return f"{'udpout' if scheme in ('udpclient', 'udpout') else 'udpin'}:{host}:{port}"
+    """A UDP address the face serves (any form `parse_endpoint` reads: `udp:HOST:PORT`,
+    `mavlink+udp://HOST:PORT`; `udpclient:HOST:PORT` or `udpout:`, as SITL's --serial0 says it, sends
+    first) as pymavlink's `udpin:HOST:PORT` or `udpout:HOST:PORT`."""
+    try:
+        endpoint = parse_endpoint(address)
+        if endpoint.kind not in ("udp", "udpout") or not endpoint.host:
+            raise EndpointError("only UDP with a host can be served")
+        return endpoint.pymavlink_address()
+    except EndpointError:
+        raise MavlinkFaceError(f"--listen {address!r}: expected udp:HOST:PORT, e.g. udp:127.0.0.1:14550") from None
 
 
 def _refuse_busy_port(listen: str, address: str) -> None:

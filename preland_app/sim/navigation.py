@@ -43,6 +43,18 @@ class NavEstimate:
     delta_velocity_east_m_s: float = 0.0
 
 
+def gps_drift(spec: NavigationSpec, noise: GaussianStream) -> tuple[SmoothGaussMarkov, SmoothGaussMarkov]:
+    """The GPS position error's slow drift, north and east (m): per axis a Gauss-Markov process of stationary
+    std `gps_drift_sigma_m` and time constant `gps_drift_tau_s`, low-pass filtered over `gps_drift_smooth_s`,
+    drawing from `noise` (north first). The embedded autopilot's estimate and SITL's glitch offsets share it."""
+    def axis() -> SmoothGaussMarkov:
+        return SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
+                                 smooth_s=spec.gps_drift_smooth_s, noise=noise)
+
+    north = axis()
+    return north, axis()
+
+
 class NavigationModel:
     """Turns the true state into the autopilot's estimate, with seeded errors."""
 
@@ -56,10 +68,7 @@ class NavigationModel:
         self._imu_noise = streams["imu"]
         self._rangefinder_noise = streams["rangefinder"]
         self._velocity_noise = streams["velocity"]
-        self._drift_north = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
-                                              smooth_s=spec.gps_drift_smooth_s, noise=gps)
-        self._drift_east = SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
-                                             smooth_s=spec.gps_drift_smooth_s, noise=gps)
+        self._drift_north, self._drift_east = gps_drift(spec, gps)
         self._fast_north = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=gps)
         self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=gps)
         self._baro_drift = GaussMarkov(sigma=spec.baro_drift_sigma_m, tau_s=spec.baro_drift_tau_s, noise=baro)

@@ -29,6 +29,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from ..mavlink.endpoint import parse_endpoint
 from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
 from .tlog import TlogWriter
 from .types import (
@@ -171,9 +172,10 @@ def _heartbeat_armed(fields: dict[str, Any]) -> bool:
 
 
 def mavsdk_connection_url(url: str) -> str:
-    """`url` as MAVSDK takes it: `tcp://host:port` (a vehicle or SITL serving TCP, as ArduPilot's
-    documentation writes it) is MAVSDK's `tcpout://host:port`; MAVSDK 3 deprecates the bare `tcp://`."""
-    return "tcpout://" + url[len("tcp://"):] if url.startswith("tcp://") else url
+    """`url` (any form `parse_endpoint` reads) as MAVSDK takes it: `tcp://host:port` (a vehicle or SITL
+    serving TCP, as ArduPilot's documentation writes it) is MAVSDK's `tcpout://host:port`; MAVSDK 3
+    deprecates the bare `tcp://`."""
+    return parse_endpoint(url).mavsdk_url()
 
 
 @dataclass(slots=True)

@@ -132,7 +132,7 @@ class RayExecutor(TrialExecutor):
 
     def submit(self, job: TrialJob) -> None:
         resources = {}
-        if job.sitl is not None:
+        if job.runtime.cluster_resource is not None:
             if not self._sitl_checked:
                 self._check_sitl_nodes()
             resources = {self.options.sitl_resource: 1}
