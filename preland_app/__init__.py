@@ -5,7 +5,7 @@ The Python API (`preland_app/api.py`) is re-exported here, loaded on first use:
     from preland_app import fly, load_mission, run_campaign, read_results
 """
 
-__version__ = "0.1.0"
+from .version import __version__
 
 _API = (
     "CampaignRun", "CampaignSpec", "LandModeRow", "LandStrategy", "LandingContext", "LandingReport", "MarkerFrame",

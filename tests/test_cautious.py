@@ -5,7 +5,7 @@ from dataclasses import replace
 import pytest
 
 from preland_app.landing.cautious import CautiousSpec
-from preland_app.landing.precision import AttemptTracker
+from preland_app.landing.attempts import AttemptTracker
 from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
 

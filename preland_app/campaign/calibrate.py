@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
+from ..version import __version__
 from ..config.loader import deep_merge
 from ..config.mission import MissionSpec, load_mission
 from ..errors import PrelandError

@@ -11,7 +11,7 @@ from typing import Any
 
 from ..errors import PrelandError
 from .field_records import close_matches
-from .report import _references
+from .references import stored_references
 from .store import ResultsStore
 
 SOURCES = ("sim", "sitl", "field")
@@ -54,7 +54,7 @@ def overview(store: ResultsStore) -> list[CampaignEntry]:
     entries = []
     for name in store.campaigns():
         row = store.db.execute("SELECT source_path, created_at FROM campaigns WHERE name = ?", (name,)).fetchone()
-        references, _ = _references(store, name)
+        references, _ = stored_references(store, name)
         scenarios: dict[str, dict[str, Any]] = {}
         for trial in store.db.execute(
                 "SELECT scenario, MIN(scenario_index) AS idx, source, COUNT(*) AS n, "

@@ -10,6 +10,8 @@ differences stay visible beside metre ones.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import math
 from pathlib import Path
 
@@ -24,8 +26,10 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from .figure_trajectory import choose_trial, trajectory_figure  # noqa: E402
-from .report import ScenarioSummary  # noqa: E402
 from .store import ResultsStore  # noqa: E402
+
+if TYPE_CHECKING:  # the report writes the figures: only its summaries' type is needed here
+    from .report import ScenarioSummary
 
 DEFAULT_PNG_DPI = 300
 SOURCE_MARKERS = {"sim": "o", "sitl": "s", "field": "^"}

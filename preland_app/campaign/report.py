@@ -24,10 +24,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
 
-from ..config.loader import build
 from ..errors import PrelandError
+from .references import stored_references
 from .spec import ReferenceSpec
 from .stats import Spread, describe
 from .store import ResultsStore
@@ -122,24 +121,6 @@ class ReportError(PrelandError):
     """A report cannot be made from this store."""
 
 
-def _references(store: ResultsStore, campaign: str) -> tuple[dict[str, ReferenceSpec], Path | None]:
-    stored = store.campaign_text(campaign)
-    if stored is None:
-        return {}, None
-    text, source_path = stored
-    base = Path(source_path).parent if source_path else None
-    try:
-        data = yaml.safe_load(text) or {}
-    except yaml.YAMLError:
-        return {}, base
-    references = {}
-    for scenario in data.get("scenarios", []) or []:
-        if isinstance(scenario, dict) and isinstance(scenario.get("reference"), dict):
-            references[str(scenario.get("label"))] = build(ReferenceSpec, scenario["reference"],
-                                                           path=source_path or campaign, field="reference")
-    return references, base
-
-
 def _published_trials(reference: ReferenceSpec, base: Path | None) -> list[PublishedTrial]:
     if reference.trials_csv is None:
         return []
@@ -167,7 +148,7 @@ def summarize(store: ResultsStore, campaign: str) -> list[ScenarioSummary]:
     if not trials:
         raise ReportError(f"{store.path}: no trials for campaign {campaign!r} "
                           f"(campaigns here: {', '.join(store.campaigns()) or 'none'})")
-    references, base = _references(store, campaign)
+    references, base = stored_references(store, campaign)
     summaries: dict[tuple[str, str], ScenarioSummary] = {}
     for trial in trials:
         key = (trial["scenario"], trial["source"])

@@ -15,7 +15,7 @@ import typer
 from typer._click import exceptions as click_errors  # typer 0.29's own click: the `click` package's are others
 from typer.core import TyperGroup
 
-from .. import __version__
+from ..version import __version__
 from ..errors import PrelandError
 
 DPI = 300  # --dpi of every command that draws a figure, a trial's path or a printable board

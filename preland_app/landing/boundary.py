@@ -34,6 +34,7 @@ from ..sensing.readings import TargetReading
 from ..sensing.spec import SensorsSpec
 from ..vehicle.protocol import Vehicle
 from ..vehicle.types import FlightMode, LandingTarget, PositionNed, Telemetry, VelocityNed
+from .attempts import AttemptTracker
 
 # view -> what it forwards to. Only this module reads it; a view holds no reference to its target.
 _TARGETS: weakref.WeakKeyDictionary[object, Any] = weakref.WeakKeyDictionary()
@@ -170,8 +171,6 @@ class SensorFaults:
     reports and on the landing attempt (a climb of 0.5 m after the hand-over starts a new one)."""
 
     def __init__(self, *, faults: Mapping[str, FaultSpec], rng: np.random.Generator) -> None:
-        from .precision import AttemptTracker
-
         streams = dict(zip(("irlock", "marker"), rng.spawn(2))) if faults else {}
         self.injectors = {sensor: FaultInjector(sensor=sensor, spec=spec, rng=streams[sensor])
                           for sensor, spec in sorted(faults.items())}
