@@ -28,13 +28,14 @@ from ..clock import Clock
 from ..errors import PrelandError
 from ..events import EventLog, MissionEvent
 from ..sensing.camera import CameraModel, Frame
-from ..sensing.faults import FaultInjector, FaultSpec
+from ..sensing.faults import FaultSpec
 from ..sensing.marker import MarkerDetection
 from ..sensing.readings import TargetReading
 from ..sensing.spec import SensorsSpec
 from ..vehicle.protocol import Vehicle
 from ..vehicle.types import FlightMode, LandingTarget, PositionNed, Telemetry, VelocityNed
 from .attempts import AttemptTracker
+from .fault_gate import FaultGate
 
 # view -> what it forwards to. Only this module reads it; a view holds no reference to its target.
 _TARGETS: weakref.WeakKeyDictionary[object, Any] = weakref.WeakKeyDictionary()
@@ -171,9 +172,8 @@ class SensorFaults:
     reports and on the landing attempt (a climb of 0.5 m after the hand-over starts a new one)."""
 
     def __init__(self, *, faults: Mapping[str, FaultSpec], rng: np.random.Generator) -> None:
-        streams = dict(zip(("irlock", "marker"), rng.spawn(2))) if faults else {}
-        self.injectors = {sensor: FaultInjector(sensor=sensor, spec=spec, rng=streams[sensor])
-                          for sensor, spec in sorted(faults.items())}
+        self.gate = FaultGate(faults=faults, sensors=sorted(faults), rng=rng,
+                              streams=("irlock", "marker") if faults else ())
         self.attempts = AttemptTracker()
         self.height_m: float | None = None
         self.landing = False
@@ -185,17 +185,11 @@ class SensorFaults:
             self.attempts.update(telemetry.altitude_rel_m)
 
     def admit(self, sensor: str) -> bool:
-        injector = self.injectors.get(sensor)
-        return injector is None or injector.admit(height_m=self.height_m, attempt=self.attempts.attempt)
+        return self.gate.admit(sensor, height_m=self.height_m, attempt=self.attempts.attempt)
 
     def details(self) -> dict[str, Any]:
         """Per sensor: the fault, the values produced and the values dropped (as the built-in modes report)."""
-        details: dict[str, Any] = {}
-        for sensor, injector in self.injectors.items():
-            details[f"{sensor}_fault"] = str(injector.spec)
-            details[f"{sensor}_produced"] = injector.produced
-            details[f"{sensor}_dropped"] = injector.dropped
-        return details
+        return self.gate.details()
 
 
 class CameraView:

@@ -33,7 +33,8 @@ from dataclasses import dataclass, field
 
 from ..clock import wait_until
 from ..errors import WaitTimeout, require
-from ..sensing.faults import FaultInjector, FaultSpec
+from ..sensing.faults import FaultSpec
+from .fault_gate import FaultGate
 from ..sensing.marker import MarkerDetection
 from ..vehicle.types import FlightMode
 from .base import LandingContext, LandingReport, ScoringReference
@@ -203,7 +204,7 @@ class PaperLanding:
                  marker_fault: FaultSpec | None = None) -> None:
         self.adaptive = adaptive
         self.marker_fault = marker_fault or FaultSpec()
-        self.injector: FaultInjector | None = None
+        self.gate: FaultGate | None = None
         self.name = "paper_adaptive" if adaptive else "paper_static"
         self.policy = PaperPolicy(adaptive=adaptive, spec=spec or PaperSpec())
         self.aborted_to_gps = False
@@ -220,7 +221,8 @@ class PaperLanding:
         vehicle, clock, spec = context.vehicle, context.clock, self.policy.spec
         camera, detector = sensors.camera, sensors.marker_detector
         latency_s = sensors.spec.marker.processing_latency_s
-        self.injector = FaultInjector(sensor="marker", spec=self.marker_fault, rng=context.rng.spawn(1)[0])
+        self.gate = FaultGate(faults={"marker": self.marker_fault}, sensors=("marker",), rng=context.rng,
+                              streams=("marker",))
         context.events.add("land_command", f"{self.name}: the companion takes over the landing")
         started_s = clock.now_s()
         last_detection_s = started_s
@@ -237,7 +239,7 @@ class PaperLanding:
             # The algorithm's "altitude": height above the ground (rangefinder when in range, else barometer).
             altitude_m = telemetry.height_above_ground_m
             now_s = clock.now_s()
-            if detections and not self.injector.admit(height_m=telemetry.height_above_ground_m):
+            if detections and not self.gate.admit("marker", height_m=telemetry.height_above_ground_m):
                 detections = []  # the fault drops this frame's value
             if altitude_m <= spec.z1_m:
                 context.events.add("handover", f"below z1 ({spec.z1_m:g} m): LAND", altitude_rel_m=altitude_m)
@@ -293,7 +295,5 @@ class PaperLanding:
             "frames_with_marker": self.frames_with_marker,
             "first_detection_altitude_m": None if self.first_detection_altitude_m is None
             else round(self.first_detection_altitude_m, 2),
-            "marker_fault": str(self.injector.spec),
-            "marker_produced": self.injector.produced,
-            "marker_dropped": self.injector.dropped,
+            **self.gate.details(),
         })

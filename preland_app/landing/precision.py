@@ -18,12 +18,13 @@ from collections import Counter
 
 from ..clock import wait_until
 from ..errors import PrelandError
-from ..sensing.faults import FaultCommand, FaultInjector, FaultSpec
+from ..sensing.faults import FaultCommand, FaultSpec
 from ..sensing.fusion import FusedSensor
 from ..sensing.marker import choose_smallest, reading_from_detection
 from ..sensing.readings import TargetReading
 from ..vehicle.types import FlightMode
 from .attempts import AttemptTracker
+from .fault_gate import FaultGate
 from .base import LandingContext, LandingReport, ScoringReference
 from .cautious import CautiousSpec
 from .cautious_retry import CompanionRetry
@@ -50,7 +51,7 @@ class PrecisionLanding:
         self.cautious = cautious
         self.faults = dict(faults or {})
         self.counts: Counter[str] = Counter()
-        self.injectors: dict[str, FaultInjector] = {}
+        self.gate: FaultGate | None = None
         self.attempts = AttemptTracker()
         self._fused: FusedSensor | None = None
         self._height_m: float | None = None
@@ -76,8 +77,8 @@ class PrecisionLanding:
         for sensor, spec in command.faults().items():
             if not used[sensor]:
                 continue  # as the thesis' front-ends ignore commands for another subsystem
-            if sensor in self.injectors:
-                self.injectors[sensor].set_spec(spec)
+            if self.gate is not None:
+                self.gate.set_spec(sensor, spec)
             self.faults[sensor] = spec
 
     async def _configure(self, context: LandingContext) -> None:
@@ -101,12 +102,8 @@ class PrecisionLanding:
             need = {"irlock": "an IR-LOCK", "marker": "a camera", "fused": "an IR-LOCK and a camera"}[self.sensor]
             raise MissingSensor(f"land mode {self.name!r} with sensor {self.sensor!r} needs {need}")
         await self._configure(context)
-        streams = context.rng.spawn(2)
-        for sensor, stream in zip(("irlock", "marker"), streams):
-            used = (sensor == "irlock" and self.uses_irlock) or (sensor == "marker" and self.uses_marker)
-            if used:
-                self.injectors[sensor] = FaultInjector(sensor=sensor, spec=self.faults.get(sensor, FaultSpec()),
-                                                       rng=stream)
+        used = [sensor for sensor in ("irlock", "marker") if getattr(self, f"uses_{sensor}")]
+        self.gate = FaultGate(faults=self.faults, sensors=used, rng=context.rng, streams=("irlock", "marker"))
         if self.sensor == "fused":
             self._fused = FusedSensor(sensors.spec.fusion)
         self._height_m = (await vehicle.telemetry()).height_above_ground_m
@@ -145,10 +142,8 @@ class PrecisionLanding:
             details["cautious_pauses"] = self._retry.pauses
             details["cautious_retries"] = self._retry.retries
         details.update({key: value for key, value in sorted(self.counts.items())})
-        for sensor, injector in sorted(self.injectors.items()):
-            details[f"{sensor}_fault"] = str(injector.spec)
-            details[f"{sensor}_produced"] = injector.produced
-            details[f"{sensor}_dropped"] = injector.dropped
+        if self.gate is not None:
+            details.update(self.gate.details())
         if self._fused is not None:
             details.update({f"fused_{key}": value for key, value in self._fused.counts.items()})
         return details
@@ -173,8 +168,8 @@ class PrecisionLanding:
 
     async def _deliver(self, context: LandingContext, reading: TargetReading) -> None:
         """A new sensor value: through the fault injector, then to the fused sensor or the autopilot."""
-        injector = self.injectors.get(reading.sensor)
-        if injector is not None and not injector.admit(height_m=self._height_m, attempt=self.attempt):
+        if self.gate is not None and not self.gate.admit(reading.sensor, height_m=self._height_m,
+                                                         attempt=self.attempt):
             return
         if self._fused is not None:
             self._fused.offer(reading)
