@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import importlib
 import inspect
 import json
 import sys
@@ -364,13 +365,65 @@ def outcomes_page() -> str:
             + _table(("column",), [(f"`{c}`",) for c in TRAJECTORY_COLUMNS]))
 
 
+def runtimes_page() -> str:
+    import inspect as _inspect
+
+    from preland_app.cli.fly import OPTION_FLAGS
+    from preland_app.runtime.base import ENTRY_POINT_GROUP, _BUILT_IN, runtime_class
+    from preland_app.runtime.mavlink import MavlinkOptions
+    from preland_app.runtime.sitl import SitlOptions
+
+    doc = _inspect.getdoc(importlib.import_module("preland_app.runtime.base")) or ""
+    table = "\n".join(line for line in doc.splitlines() if line.startswith("|"))
+    out = [GENERATED, "# Runtimes\n",
+           "Where a trial flies is a runtime, named by a URL: `preland fly --runtime URL`, `preland campaign run "
+           "--runtime URL`, a campaign file's `runtime:` key, and `runtime=` in the Python API's `fly` and "
+           "`run_campaign`. `--sitl PATH` and `--connect ADDRESS` are shorthands for `sitl:PATH` and "
+           "`mavlink+ADDRESS`.\n", table + "\n",
+           "A MAVLink address may also be written as MAVSDK, pymavlink or ArduPilot write it (`udp://:14550`, "
+           "`udpout://HOST:PORT`, `tcp://HOST:PORT`, `serial:///dev/ttyAMA0:921600`, `udp:HOST:PORT`, "
+           "`udpclient:HOST:PORT`); `preland sim serve --listen` and `preland fault send` read the same "
+           f"forms. An installed package adds a runtime under the entry-point group `{ENTRY_POINT_GROUP}` "
+           "(name: the URL scheme; value: a class with `from_url`, `fly` and `on_this_machine`).\n"]
+    rows = []
+    for scheme in _BUILT_IN:
+        cls = runtime_class(scheme)
+        rows.append(({"sim": "`sim:`", "sitl": "`sitl:PATH`"}.get(scheme, f"`{scheme}:`" if scheme != "mavlink"
+                     else "`mavlink+...`"), f"`{cls.name}`",
+                     "`sim`" if scheme == "sim" else "`sitl`" if scheme == "sitl" else "`sim` with truth, else `field`",
+                     "any" if cls.max_workers is None else str(cls.max_workers),
+                     f"`{cls.cluster_resource}`" if cls.cluster_resource else "-",
+                     " ".join((_inspect.getdoc(cls) or "").split())))
+    out.append("Each runtime as the store records its trials (`runtime`, `source`), how many of its trials may "
+               "fly at once, and the custom resource a cluster node must advertise to run one:\n")
+    out.append(_table(("URL", "runtime", "source", "trials at once", "cluster resource", "what it is"), rows))
+    for title, options_type, exclude in (("SITL options (`sitl:`)", SitlOptions, {"binary"}),
+                                         ("MAVLink options (`mavlink+...`)", MavlinkOptions, set())):
+        out.append(f"## {title}\n")
+        out.append(" ".join((_inspect.getdoc(options_type) or "").split()) + "\n")
+        rows = []
+        for f in dataclasses.fields(options_type):
+            if f.name in exclude:
+                continue
+            default = f.default if f.default is not dataclasses.MISSING else (
+                f.default_factory() if f.default_factory is not dataclasses.MISSING else "")
+            flag = OPTION_FLAGS.get(f.name)
+            rows.append((f"`{f.name}`", f"`{default!r}`" if default not in ("", {}, ()) else "-",
+                         f"`{flag}`" if flag else "-"))
+        out.append(_table(("option", "default", "preland fly"), rows))
+    out.append("The embedded simulator (`sim:`) takes no options. An option given to a runtime that does not "
+               "take it is refused in one line naming the option and the runtime (`campaign run` names "
+               "`--tlog-dir` where `fly` has `--tlog`; see [Command line](cli.md)).\n")
+    return "\n".join(out)
+
+
 def pages() -> dict[str, Callable[[], str]]:
     result: dict[str, Callable[[], str]] = {"cli.md": cli_page}
     for kind, intro in FORMAT_INTROS.items():
         result[f"{kind}.md"] = lambda kind=kind, intro=intro: format_page(kind, intro)
     result.update({"calibratable.md": calibratable_page, "error-sources.md": error_sources_page,
                    "autopilot-parameters.md": autopilot_page, "land-modes.md": land_modes_page,
-                   "outcomes.md": outcomes_page})
+                   "outcomes.md": outcomes_page, "runtimes.md": runtimes_page})
     return result
 
 
