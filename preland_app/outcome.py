@@ -70,6 +70,35 @@ def score_touchdown(*, touchdown_ned_m: tuple[float, float], reference_ned_m: tu
 
 
 @dataclass(frozen=True, kw_only=True)
+class TrialScore:
+    """A trial's figures from ground truth: the touchdown's offset from the reference (None when it was not
+    scored), landing time (hand-over to touchdown, s) and flight time (arming to disarming, s)."""
+
+    score: LandingScore | None
+    landing_time_s: float | None
+    flight_time_s: float | None
+
+
+def reference_ned_m(*, pad_offset_ned_m: tuple[float, float], scored_from_pad: bool) -> tuple[float, float]:
+    """The point a landing's error is measured from, NED from the start position (m): the pad's centre,
+    or the take-off point (the thesis scores its GPS-only landings from there, Section 8.2.3)."""
+    return tuple(pad_offset_ned_m) if scored_from_pad else (0.0, 0.0)
+
+
+def score_trial(*, touchdown_ned_m: tuple[float, float] | None, touchdown_s: float | None, scored: bool,
+                reference_ned_m: tuple[float, float], handover_s: float | None, armed_s: float | None,
+                disarmed_s: float | None) -> TrialScore:
+    """Every runtime's scoring: the final touchdown (NED from the start, m) against the reference when the
+    trial is `scored` (it landed, or crashed), and its times (vehicle s) where each is known."""
+    score = None
+    if scored and touchdown_ned_m is not None:
+        score = score_touchdown(touchdown_ned_m=touchdown_ned_m, reference_ned_m=reference_ned_m)
+    landing_time_s = touchdown_s - handover_s if touchdown_s is not None and handover_s is not None else None
+    flight_time_s = disarmed_s - armed_s if armed_s is not None and disarmed_s is not None else None
+    return TrialScore(score=score, landing_time_s=landing_time_s, flight_time_s=flight_time_s)
+
+
+@dataclass(frozen=True, kw_only=True)
 class TrialOutcome:
     """Everything one trial produced. Times in vehicle seconds; offsets in cm."""
 

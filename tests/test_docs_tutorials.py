@@ -11,7 +11,7 @@ Conventions of the pages (this test is their only reader):
   run) and not executed; any language (yaml, python, toml).
 * `<!-- not-run: REASON -->` before a block: shown, not run (building ArduPilot, a real drone's serial
   port). Each needs a reason, and a page has at most MAX_NOT_RUN of them.
-* `<!-- output -->` before a ```text block: what the reader sees. Each of its lines, in order, matches a
+* `<!-- output -->` before a ```text title="Output" block (the title shows on the site): what the reader sees. Each of its lines, in order, matches a
   line the page's commands printed (stdout and stderr); `...` in a line matches anything, a line that is
   only `...` is skipped.
 * `<!-- stdin: A | B -->` before a ```sh block: what the reader types at its prompts, one item a line.
@@ -58,7 +58,7 @@ STAND_IN = ROOT / "tests" / "tools" / "fake_sitl.py"
 STAND_IN_SPEEDUP = 8
 SHOWN_LANGUAGES = {"sh", "python", "yaml", "toml", "text"}
 DIRECTIVE = re.compile(r"<!--\s*(file|not-run|output|stdin)\s*(?::\s*(.*?))?\s*-->")
-FENCE = re.compile(r"^(?P<indent> *)```(?P<lang>[\w-]*)\s*$")
+FENCE = re.compile(r'^(?P<indent> *)```(?P<lang>[\w-]*)(?:\s+title="(?P<title>[^"]*)")?\s*$')
 
 
 @dataclass

@@ -11,7 +11,7 @@ from ..config.mission import MissionSpec
 from ..events import EventLog
 from ..landing.base import ScoringReference
 from ..mission import MissionReport, MissionRunner
-from ..outcome import Outcome, TrialOutcome, outcome_for_error, score_touchdown
+from ..outcome import Outcome, TrialOutcome, outcome_for_error, reference_ned_m, score_trial
 from ..sim.noise import child_rng
 from ..sim.simulator import Simulator
 from ..vehicle.sim_backend import SimVehicle
@@ -104,18 +104,17 @@ def _score(*, request: TrialRequest, mission: MissionSpec, simulator: Simulator,
         outcome = Outcome.CRASHED
         message = (f"touched down at {crash.vertical_speed_m_s:.1f} m/s vertical speed, "
                    f"{crash.tilt_deg:.0f} deg tilt")
-    reference = mission.pad.offset_from_start_ned_m if scoring is ScoringReference.PAD else (0.0, 0.0)
     final = touchdowns[-1] if touchdowns and simulator.true_pose().on_ground else None
-    score = None
-    if final is not None and outcome in (Outcome.LANDED, Outcome.CRASHED):
-        score = score_touchdown(touchdown_ned_m=(final.north_m, final.east_m), reference_ned_m=reference)
-    landing_time_s = None
-    if final is not None and report.handover_time_s is not None:
-        landing_time_s = final.time_s - report.handover_time_s
     armed = events.first("armed")
-    flight_time_s = None
-    if armed is not None and report.disarmed_time_s is not None:
-        flight_time_s = report.disarmed_time_s - armed.time_s
+    scored = score_trial(
+        touchdown_ned_m=(final.north_m, final.east_m) if final is not None else None,
+        touchdown_s=final.time_s if final is not None else None,
+        scored=outcome in (Outcome.LANDED, Outcome.CRASHED),
+        reference_ned_m=reference_ned_m(pad_offset_ned_m=mission.pad.offset_from_start_ned_m,
+                                        scored_from_pad=scoring is ScoringReference.PAD),
+        handover_s=report.handover_time_s, armed_s=armed.time_s if armed is not None else None,
+        disarmed_s=report.disarmed_time_s)
+    score, landing_time_s, flight_time_s = scored.score, scored.landing_time_s, scored.flight_time_s
     details = dict(report.landing.details) if report.landing else {}
     details["wind_from_deg"] = round(simulator.wind.direction_from_deg, 1)
     return TrialOutcome(

@@ -28,7 +28,7 @@ from ..mavlink.endpoint import Endpoint, parse_endpoint
 from ..mavlink.fault_message import listen
 from ..sensing.faults import FaultCommand
 from ..mission import MissionRunner
-from ..outcome import Outcome, TrialOutcome, outcome_for_error, score_touchdown
+from ..outcome import Outcome, TrialOutcome, outcome_for_error, reference_ned_m, score_trial
 from ..sensing.virtual_camera import CameraPose
 from ..sim.noise import child_rng
 from ..vehicle.mavlink_backend import MavlinkVehicle
@@ -168,22 +168,22 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
             keeper.close()
         await vehicle.close()
     trajectory = recorder.array()
-    score = touchdown = None
-    landing_time_s = None
     command = events.first("land_handover")
+    final = touchdown = None
     if truth_source is not None and outcome is Outcome.LANDED and len(trajectory):
-        final = trajectory[-1]
-        reference = (mission.pad.offset_from_start_ned_m if strategy.scoring_reference is ScoringReference.PAD
-                     else (0.0, 0.0))
-        score = score_touchdown(touchdown_ned_m=(final[4], final[5]), reference_ned_m=reference)
+        final = trajectory[-1]  # where it came to rest; the first row on the ground after the hand-over times it
         on_ground = [row for row in trajectory if command is not None and row[0] >= command.time_s
                      and row[6] <= ON_GROUND_M]
         touchdown = on_ground[0] if on_ground else None
-        if touchdown is not None:
-            landing_time_s = float(touchdown[0] - command.time_s)
     armed = events.first("armed")
-    flight_time_s = (runner.report.disarmed_time_s - armed.time_s
-                     if armed is not None and runner.report.disarmed_time_s is not None else None)
+    scored = score_trial(
+        touchdown_ned_m=(final[4], final[5]) if final is not None else None,
+        touchdown_s=float(touchdown[0]) if touchdown is not None else None, scored=final is not None,
+        reference_ned_m=reference_ned_m(pad_offset_ned_m=mission.pad.offset_from_start_ned_m,
+                                        scored_from_pad=strategy.scoring_reference is ScoringReference.PAD),
+        handover_s=command.time_s if command is not None else None,
+        armed_s=armed.time_s if armed is not None else None, disarmed_s=runner.report.disarmed_time_s)
+    score, landing_time_s, flight_time_s = scored.score, scored.landing_time_s, scored.flight_time_s
     details = dict(runner.report.landing.details) if runner.report.landing else {}
     details["runtime"] = "mavlink"
     details["clock_rate"] = round(clock.rate, 2)
