@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from ..config.loader import build, deep_merge, load_spec_file
+from ..config.loader import build, deep_merge, load_spec_file, to_plain
 from ..runtime.base import RuntimeUrlError, split_url
 from ..config.mission import FAULTS_SCHEMA, HASH_NEVER, HASH_WHEN_SET, PARAMS_SCHEMA, MissionSpec, load_mission
 from ..errors import SpecError, SpecValueError, require
@@ -131,21 +131,9 @@ def _hashed(value: Any, spec_field: dataclasses.Field) -> bool:
     return True
 
 
-def _to_plain(value: Any) -> Any:
-    if dataclasses.is_dataclass(value):
-        return {f.name: _to_plain(getattr(value, f.name)) for f in dataclasses.fields(value) if _hashed(value, f)}
-    if isinstance(value, (list, tuple)):
-        return [_to_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {str(k): _to_plain(v) for k, v in value.items()}
-    if hasattr(value, "value") and not isinstance(value, (int, float, str, bool)):
-        return value.value  # enums
-    return value
-
-
 def spec_hash(value: Any) -> str:
     """A short stable hash of a spec's content."""
-    text = json.dumps(_to_plain(value), sort_keys=True, default=str)
+    text = json.dumps(to_plain(value, keep=_hashed), sort_keys=True, default=str)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
 
@@ -168,7 +156,7 @@ def resolve_scenarios(campaign: CampaignSpec, *, mission: MissionSpec | None = N
                 field_name = "land_" + field_name
             raise SpecError(path=path, field=f"{where}.{field_name}", problem=error.problem) from None
         if scenario.environment:
-            merged = deep_merge(_to_plain(flown.environment), scenario.environment)
+            merged = deep_merge(to_plain(flown.environment, keep=_hashed), scenario.environment)
             environment = build(EnvironmentSpec, merged, path=path, field=f"{where}.environment")
             flown = replace(flown, environment=environment)
         if scenario.params:

@@ -12,6 +12,7 @@ import enum
 import types
 import typing
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 
 import yaml
@@ -175,6 +176,31 @@ def build(cls: type[T], data: Any, *, path: str, field: str = "") -> T:
         return cls(**kwargs)
     except SpecValueError as error:
         raise SpecError(path=path, field=_join(field, error.field), problem=error.problem) from None
+
+
+def to_plain(value: Any, *, keep: Callable[[Any, dataclasses.Field], bool] | None = None,
+             float_digits: int | None = None) -> Any:
+    """A spec (frozen dataclasses, tuples, dicts, enums) as plain JSON/YAML data: dataclasses as dicts of the
+    fields `keep(instance, field)` admits (all but `source_path` by default), enums as their values, floats
+    rounded to `float_digits` when given. The one walker from specs to data: spec hashes, written profiles."""
+    if keep is None:
+        keep = _not_source_path
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: to_plain(getattr(value, f.name), keep=keep, float_digits=float_digits)
+                for f in dataclasses.fields(value) if keep(value, f)}
+    if isinstance(value, (list, tuple)):
+        return [to_plain(v, keep=keep, float_digits=float_digits) for v in value]
+    if isinstance(value, dict):
+        return {str(k): to_plain(v, keep=keep, float_digits=float_digits) for k, v in value.items()}
+    if isinstance(value, enum.Enum):
+        return value.value
+    if float_digits is not None and isinstance(value, float):
+        return round(value, float_digits)
+    return value
+
+
+def _not_source_path(_value: Any, spec_field: dataclasses.Field) -> bool:
+    return spec_field.name != "source_path"
 
 
 def load_spec_file(cls: type[T], path: str | Path) -> T:

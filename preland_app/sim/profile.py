@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from ..config.loader import build, deep_merge, load_spec_file
+from ..config.loader import build, deep_merge, load_spec_file, to_plain
 from ..errors import SpecError, require
 from ..sensing.spec import SensorsSpec
 from .calibratable import CalibratableError, calibratable_parameters, find_calibratable, section_and_path
@@ -180,17 +180,8 @@ def resolve_profile_path(name: str, *, relative_to: Path) -> Path:
     return path if path.is_absolute() else relative_to / path
 
 
-def _plain(value: Any) -> Any:
-    if dataclasses.is_dataclass(value):
-        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)
-                if f.name != "source_path" and getattr(value, f.name) is not None}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, float):
-        return round(value, 6)
-    return value
+def _written(value: Any, spec_field: dataclasses.Field) -> bool:
+    return spec_field.name != "source_path" and getattr(value, spec_field.name) is not None
 
 
 def profile_yaml(profile: ProfileSpec) -> str:
@@ -198,7 +189,8 @@ def profile_yaml(profile: ProfileSpec) -> str:
     header = ("# yaml-language-server: $schema=../schemas/profile.schema.json\n"
               "# A simulation profile (docs: reference/profile.md): overrides of the simulated world,\n"
               "# and, for a fitted one, the data it was fitted on and how it scores.\n")
-    return header + yaml.safe_dump(_plain(profile), sort_keys=False, allow_unicode=True, width=110)
+    return header + yaml.safe_dump(to_plain(profile, keep=_written, float_digits=6), sort_keys=False,
+                                   allow_unicode=True, width=110)
 
 
 def write_profile(profile: ProfileSpec, path: Path) -> None:
