@@ -62,8 +62,24 @@ class _Choices(enum.EnumMeta):
         return value in cls._values()
 
 
-def choices(values: Callable[[], Iterable[str]]) -> type:
-    """The type of an option or argument that takes one of `values()`, e.g. `choices(lambda: FORMATS)`: `--help`
+def _values_of(reference: str) -> Callable[[], Iterable[str]]:
+    """`"package.module:NAME"` as a function giving its values, imported on first use: a constant's items
+    (a mapping's keys), an Enum's values, or what a function returns."""
+    def values() -> Iterable[str]:
+        import importlib
+
+        module, _, name = reference.partition(":")
+        found = getattr(importlib.import_module(module), name)
+        if isinstance(found, type) and issubclass(found, enum.Enum):
+            return [member.value for member in found]
+        return found() if callable(found) else found
+
+    return values
+
+
+def choices(values: Callable[[], Iterable[str]] | str) -> type:
+    """The type of an option or argument that takes one of `values()`, e.g. `choices(lambda: FORMATS)`, or of
+    the values a reference names, e.g. `choices("preland_app.campaign.export:FORMATS")`: `--help`
     shows them (png|pdf|svg) and any other value is refused before the command runs, in one line naming the
     option and the values (exit 2).
 
@@ -72,6 +88,9 @@ def choices(values: Callable[[], Iterable[str]]) -> type:
     defines them (a constant, an enum, a registry) without importing that module before it is needed (the pad
     renderer's paper sizes would bring matplotlib into every `preland` command) and with what a registry holds
     then (an executor registered before the app runs is a choice). The command receives the value as a str."""
+
+    if isinstance(values, str):
+        values = _values_of(values)
 
     class Choices(enum.Enum, metaclass=_Choices):
         _values = staticmethod(lambda: tuple(str(value) for value in values()))

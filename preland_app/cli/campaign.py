@@ -11,16 +11,10 @@ from ..errors import PrelandError
 from .app import EXIT_FAILED, app, choices, fail, progress_bar
 
 
-def _executor_names() -> list[str]:
-    from ..campaign.executors import executor_names
-
-    return executor_names()
-
-
 # The executors are a registry (register_executor) with no entry point group: only Python code that runs
 # before the app can add one, and the choices are read from the registry when --executor is shown or checked,
 # so they are what it holds then.
-Executor = choices(_executor_names)
+Executor = choices("preland_app.campaign.executors:executor_names")
 
 campaign_app = typer.Typer(help="Campaigns: run repeated trials into a results store; list, report, compare, "
                                 "export, browse or delete what it holds.", no_args_is_help=True)

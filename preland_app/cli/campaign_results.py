@@ -15,27 +15,9 @@ FIGURE_FORMATS = ("png", "pdf", "svg")
 FigureFormat = choices(lambda: FIGURE_FORMATS)
 
 
-def _export_formats():
-    from ..campaign.export import FORMATS
-
-    return FORMATS
-
-
-def _export_tables():
-    from ..campaign.export import TABLES
-
-    return TABLES
-
-
-def _measures():
-    from ..campaign.compare import MEASURES
-
-    return MEASURES
-
-
-ExportFormat = choices(_export_formats)
-ExportTable = choices(_export_tables)
-Measure = choices(_measures)
+ExportFormat = choices("preland_app.campaign.export:FORMATS")
+ExportTable = choices("preland_app.campaign.export:TABLES")
+Measure = choices("preland_app.campaign.compare:MEASURES")
 
 
 def parse_trial(text: str | None) -> tuple[str, int] | None:

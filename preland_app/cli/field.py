@@ -13,27 +13,9 @@ from .app import DPI, EXIT_FAILED, PAD_DPI, app, choices, fail
 VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4")  # the containers VideoRecorder writes (FFV1, mp4v)
 
 
-def _pad_presets():
-    from ..sensing.pad import PAD_PRESETS
-
-    return PAD_PRESETS
-
-
-def _paper_sizes():
-    from ..sensing.pad_render import PAPER_SIZES_M  # imports matplotlib: only when pad render needs the sizes
-
-    return PAPER_SIZES_M
-
-
-def _dictionaries():
-    from ..sensing.pad import DICTIONARIES
-
-    return DICTIONARIES
-
-
-PadPreset = choices(_pad_presets)
-PaperSize = choices(_paper_sizes)
-Dictionary = choices(_dictionaries)
+PadPreset = choices("preland_app.sensing.pad:PAD_PRESETS")
+PaperSize = choices("preland_app.sensing.pad_render:PAPER_SIZES_M")  # imported (with matplotlib) on use
+Dictionary = choices("preland_app.sensing.pad:DICTIONARIES")
 
 
 pad_app = typer.Typer(help="Landing pads: render printable pads.", no_args_is_help=True)

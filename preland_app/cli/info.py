@@ -8,13 +8,7 @@ from .app import app, choices
 from .app import columns
 
 
-def _schema_kinds():
-    from ..config.schema import SCHEMA_KINDS
-
-    return SCHEMA_KINDS
-
-
-SchemaKind = choices(_schema_kinds)
+SchemaKind = choices("preland_app.config.schema:SCHEMA_KINDS")
 
 
 @app.command("modes")

@@ -21,20 +21,8 @@ from .app import open_store
 from .campaign_results import FIGURE_FORMATS
 
 
-def _outcomes() -> list[str]:
-    from ..outcome import Outcome
-
-    return [outcome.value for outcome in Outcome]
-
-
-def _sources():
-    from ..campaign.catalog import SOURCES
-
-    return SOURCES
-
-
-OutcomeName = choices(_outcomes)
-Source = choices(_sources)
+OutcomeName = choices("preland_app.outcome:Outcome")
+Source = choices("preland_app.campaign.catalog:SOURCES")
 OLD_RECORD_OPTIONS = ("--db", "--campaign", "--scenario")  # trial record's place, as it was given before
 
 
