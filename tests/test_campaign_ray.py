@@ -305,3 +305,18 @@ def test_a_ray_trial_runs_opencv_on_as_many_threads_as_cpus_it_asked_for(cluster
 
     assert ray.get(trial_then_threads.remote(job, 1), timeout=120) == ("landed", 1)
     assert ray.get(trial_then_threads.remote(job, 2), timeout=120) == ("landed", 2)
+
+
+def test_an_address_asked_for_is_checked_even_when_this_process_joined_a_cluster(cluster, tmp_path):
+    import socket
+
+    with socket.socket() as closed:
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]  # nothing listens there once the socket is closed
+    assert ray.is_initialized()  # the module's cluster: joined, and not the address asked for
+    path = write_campaign(tmp_path, "name: elsewhere\ntrials: 1\nscenarios: [{label: gps, land: normal}]\n")
+    result = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(tmp_path / "r.db"), "--quiet",
+                                      "--executor", "ray", "--ray-address", f"127.0.0.1:{port}"])
+    assert result.exit_code == 2, result.output
+    assert result.stderr.strip() == (f"preland: error: --executor ray: cannot reach a Ray cluster at 127.0.0.1:{port}: "
+                                     "connection refused")

@@ -78,13 +78,15 @@ class RayExecutor(TrialExecutor):
 
     def start(self) -> None:
         ray = self._ray
+        if self.options.address is not None:
+            check_reachable(self.options.address)  # an address asked for is checked, whatever this process joined
         if ray.is_initialized():  # a caller (a notebook, a test) already joined a cluster: use it, leave it up
             self._task = ray.remote(run_job_in_ray_worker)
             self._check_trial_cpus()
             return
         address = self.options.address or os.environ.get("RAY_ADDRESS") or None
         quiet = dict(logging_level=logging.WARNING, log_to_driver=False)
-        if address is not None:
+        if address is not None and self.options.address is None:
             check_reachable(address)
         try:
             if address is None:
