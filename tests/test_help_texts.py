@@ -16,7 +16,7 @@ from preland_app.campaign import browse, compare, export
 from preland_app.campaign.catalog import SOURCES
 from preland_app.campaign.executors import executor_names, registry
 from preland_app.cli import app
-from preland_app.cli.app import DPI, PAD_DPI
+from preland_app.cli.app import DPI
 from preland_app.cli.campaign_results import FIGURE_FORMATS
 from preland_app.config import schema
 from preland_app.landing.registry import PRECISION_SENSORS
@@ -195,15 +195,15 @@ def test_every_group_names_its_commands_in_its_help():
 
 # 4. --dpi.
 
-def test_every_dpi_option_defaults_to_the_one_constant_but_the_pads():
+def test_every_dpi_option_defaults_to_the_one_constant():
     seen = {}
     for path, command in _tree():
         for param in command.params:
             if "--dpi" in getattr(param, "opts", ()):
                 seen[" ".join(path)] = param.default
                 assert f"[default: {param.default}]" in _option_rows(_help(*path), "--dpi")
-    assert seen == {"campaign report": DPI, "trial show": DPI, "camera board": DPI, "pad render": PAD_DPI}
-    assert DPI == 300 and f"not {DPI} as for figures and boards" in _flat(_help("pad", "render"))
+    assert seen == {"campaign report": DPI, "trial show": DPI, "camera board": DPI, "pad render": DPI}
+    assert DPI == 300
 
 
 # 5. trial's arguments.

@@ -18,8 +18,7 @@ from typer.core import TyperGroup
 from ..version import __version__
 from ..errors import PrelandError
 
-DPI = 300  # --dpi of every command that draws a figure, a trial's path or a printable board
-PAD_DPI = 100  # pad render: a pad sheet is 0.8 m and more, its cells centimetres (see pad render --dpi)
+DPI = 300  # --dpi of every command that draws: figures, a trial's path, printable boards and pads
 
 def _plain_help_types() -> None:
     """Help shows each option's value as click names it (PATH, INTEGER, FLOAT, TEXT) and nothing for a flag:

@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 
 from ..errors import PrelandError
-from .app import DPI, EXIT_FAILED, PAD_DPI, app, choices, fail
+from .app import DPI, EXIT_FAILED, app, choices, fail
 
 VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4")  # the containers VideoRecorder writes (FFV1, mp4v)
 
@@ -27,9 +27,7 @@ def pad_render(
     out: Path = typer.Option(..., "--out", help="Output file: .png or .pdf."),
     preset: Optional[PadPreset] = typer.Option(None, "--preset", help="Pad preset."),
     pad_file: Optional[Path] = typer.Option(None, "--pad", help="A pad YAML file instead of a preset."),
-    dpi: int = typer.Option(PAD_DPI, "--dpi", help=f"Print resolution in dots per inch (not {DPI} as for "
-                            "figures and boards: a pad's cells are centimetres wide, and rendering a pad "
-                            f"sheet at {DPI} dpi takes gigabytes of memory)."),
+    dpi: int = typer.Option(DPI, "--dpi", help="Print resolution in dots per inch."),
     paper: Optional[PaperSize] = typer.Option(None, "--paper", help="Tile the sheet onto pages of this size (one "
                                               "PDF page, or one PNG file, per tile), with crop marks to cut and "
                                               "join them."),

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 matplotlib.rcParams["pdf.fonttype"] = 42
@@ -33,6 +34,7 @@ PAGE_MARGIN_M = 0.012  # around a tile on a paper page: most printers cannot pri
 CROP_GAP_M = 0.003  # crop marks start this far outside the corner...
 CROP_LENGTH_M = 0.008  # ...and run this long
 LABEL_PT = 9.0  # labels stay legible: never smaller than this
+_PDF_BAND_PX = 1024  # rows of the sheet's raster per embedded PDF image
 PAPER_SIZES_M = {"A4": (0.210, 0.297), "A3": (0.297, 0.420)}  # portrait width x height
 
 
@@ -87,9 +89,19 @@ def _crop_marks(figure, *, left: float, bottom: float, width: float, height: flo
                                          transform=figure.transFigure))
 
 
-def _draw_pad(axes, pad: PadSpec, texture, *, font_pt: float) -> None:
+def _crop(pad: PadSpec, texture: np.ndarray, view_m: tuple[float, float, float, float]):
+    """The part of the sheet's texture a page shows (`view_m`: x0, x1, y0, y1 in m from the sheet's centre,
+    x east, y north), and its extent in the same frame: a tile page holds only its own pixels."""
+    half, ppm = pad.size_m / 2.0, texture.shape[1] / pad.size_m
+    x0, x1, y0, y1 = view_m
+    c0, c1 = max(0, math.floor((x0 + half) * ppm)), min(texture.shape[1], math.ceil((x1 + half) * ppm))
+    r0, r1 = max(0, math.floor((half - y1) * ppm)), min(texture.shape[0], math.ceil((half - y0) * ppm))
+    return texture[r0:r1, c0:c1], (-half + c0 / ppm, -half + c1 / ppm, half - r1 / ppm, half - r0 / ppm)
+
+
+def _draw_pad(axes, pad: PadSpec, *, font_pt: float) -> None:
+    """The sheet's outline and annotations (the texture itself is placed by `_save`)."""
     half = pad.size_m / 2.0
-    axes.imshow(texture, cmap="gray", vmin=0, vmax=255, extent=(-half, half, -half, half), interpolation="nearest")
     axes.add_patch(Rectangle((-half, -half), pad.size_m, pad.size_m, fill=False, edgecolor="0.5", lw=0.6))
     for marker in pad.markers:
         corners = pad.marker_corners_pad_m(marker)
@@ -116,7 +128,7 @@ def _scale_bar(figure, *, x_m: float, y_m: float, page: tuple[float, float], fon
     figure.text((x_m + 0.104) / pw, (y_m + 0.002) / ph, "10 cm", va="center", fontsize=font_pt)
 
 
-def render_printable_pad(pad: PadSpec, out: Path, *, dpi: int = 100, paper: str | None = None) -> list[Path]:
+def render_printable_pad(pad: PadSpec, out: Path, *, dpi: int = 300, paper: str | None = None) -> list[Path]:
     """Write the pad at true scale to `out` (.png or .pdf): one page, or tiles on `paper` (A4, A3) pages.
     Returns the files written (PNG tiles are `out`'s stem with `_rRcC`)."""
     suffix = out.suffix.lower()
@@ -131,6 +143,49 @@ def render_printable_pad(pad: PadSpec, out: Path, *, dpi: int = 100, paper: str 
     return _tiled(pad, out, texture, dpi=dpi, paper=paper, caption=caption)
 
 
+def _save(figure, axes, pad: PadSpec, texture: np.ndarray, view_m, out: Path, *, dpi: int, pdf=None) -> None:
+    """Write the page with the sheet's texture under its annotations, at true scale.
+
+    A PDF embeds the texture as it is, in bands of rows (RGB bytes, interpolation "none": no resampling). A PNG is composed
+    here: matplotlib draws the annotations on a transparent page, the texture's pixels are copied into
+    place and the annotations laid over them. Matplotlib's own image path costs about 130 bytes a pixel
+    (10 GB for the thesis pad at 300 dpi); this costs a few bytes a page pixel."""
+    crop, extent = _crop(pad, texture, view_m)
+    if pdf is not None or out.suffix.lower() == ".pdf":
+        # RGB bytes in bands of rows: a grey array would go through the colour map in floats, and one image
+        # of a whole sheet through the PDF writer's copies (gigabytes either way).
+        x0, x1, y0, y1 = extent
+        metres_per_px = (y1 - y0) / crop.shape[0]
+        for start in range(0, crop.shape[0], _PDF_BAND_PX):
+            band = crop[start:start + _PDF_BAND_PX]
+            top = y1 - start * metres_per_px
+            axes.imshow(np.repeat(band[:, :, None], 3, axis=2), interpolation="none", zorder=0,
+                        extent=(x0, x1, top - band.shape[0] * metres_per_px, top))
+        axes.set_xlim(view_m[0], view_m[1])
+        axes.set_ylim(view_m[2], view_m[3])
+        (pdf.savefig(figure, dpi=dpi) if pdf is not None else figure.savefig(out, dpi=dpi))
+        return
+    from PIL import Image
+
+    figure.patch.set_alpha(0.0)
+    figure.canvas.draw()
+    overlay = np.asarray(figure.canvas.buffer_rgba())
+    height_px = overlay.shape[0]
+    page = np.full(overlay.shape[:2], 255, np.uint8)
+    left_px, top_px = axes.transData.transform((extent[0], extent[3]))
+    row, col = int(round(height_px - top_px)), int(round(left_px))
+    rows = slice(max(row, 0), min(row + crop.shape[0], page.shape[0]))
+    cols = slice(max(col, 0), min(col + crop.shape[1], page.shape[1]))
+    page[rows, cols] = crop[rows.start - row:rows.stop - row, cols.start - col:cols.stop - col]
+    image = np.empty((*page.shape, 3), np.uint8)
+    for start in range(0, height_px, 512):  # in bands, so the blend's temporaries stay small
+        band = overlay[start:start + 512]
+        alpha = band[..., 3:4].astype(np.uint16)
+        under = page[start:start + 512, :, None].astype(np.uint16)
+        image[start:start + 512] = ((band[..., :3] * alpha + under * (255 - alpha) + 127) // 255).astype(np.uint8)
+    Image.fromarray(image).save(out, dpi=(dpi, dpi))
+
+
 def _single_page(pad: PadSpec, out: Path, texture, *, dpi: int, caption: str) -> Path:
     size_m = pad.size_m
     page_m = size_m + 2 * _MARGIN_M
@@ -139,14 +194,14 @@ def _single_page(pad: PadSpec, out: Path, texture, *, dpi: int, caption: str) ->
     # Axes in metres, pad frame: x east (right), y north (up), centred on the pad.
     axes = figure.add_axes((_MARGIN_M / page_m, _MARGIN_M / page_m, size_m / page_m, size_m / page_m))
     font_pt = max(LABEL_PT, min(14.0, size_m * 12))
-    _draw_pad(axes, pad, texture, font_pt=font_pt)
+    _draw_pad(axes, pad, font_pt=font_pt)
     half = size_m / 2.0
     axes.set_xlim(-half, half)
     axes.set_ylim(-half, half)
     _crop_marks(figure, left=_MARGIN_M, bottom=_MARGIN_M, width=size_m, height=size_m, page=page)
     figure.text(0.5, _MARGIN_M * 0.35 / page_m, caption, ha="center", va="center", fontsize=font_pt * 0.85)
     _scale_bar(figure, x_m=_MARGIN_M, y_m=_MARGIN_M + size_m + 0.03, page=page, font_pt=font_pt * 0.85)
-    figure.savefig(out, dpi=dpi)
+    _save(figure, axes, pad, texture, (-half, half, -half, half), out, dpi=dpi)
     plt.close(figure)
     return out
 
@@ -166,7 +221,7 @@ def _tiled(pad: PadSpec, out: Path, texture, *, dpi: int, paper: str, caption: s
             left, bottom = (pw - width) / 2, PAGE_MARGIN_M + 0.03
             figure = plt.figure(figsize=(pw / _INCH_M, ph / _INCH_M), dpi=dpi)
             axes = figure.add_axes((left / pw, bottom / ph, width / pw, height / ph))
-            _draw_pad(axes, pad, texture, font_pt=LABEL_PT)
+            _draw_pad(axes, pad, font_pt=LABEL_PT)
             axes.set_xlim(tile.x0_m, tile.x1_m)
             axes.set_ylim(tile.y0_m, tile.y1_m)
             _crop_marks(figure, left=left, bottom=bottom, width=width, height=height, page=page)
@@ -182,11 +237,12 @@ def _tiled(pad: PadSpec, out: Path, texture, *, dpi: int, paper: str, caption: s
                         wrap=True)
             _scale_bar(figure, x_m=PAGE_MARGIN_M + 0.005, y_m=ph - PAGE_MARGIN_M - 0.006, page=page,
                        font_pt=LABEL_PT * 0.85)
+            view = (tile.x0_m, tile.x1_m, tile.y0_m, tile.y1_m)
             if pdf is not None:
-                pdf.savefig(figure, dpi=dpi)
+                _save(figure, axes, pad, texture, view, out, dpi=dpi, pdf=pdf)
             else:
                 path = out.with_name(f"{out.stem}_r{tile.row}c{tile.column}{out.suffix}")
-                figure.savefig(path, dpi=dpi)
+                _save(figure, axes, pad, texture, view, path, dpi=dpi)
                 written.append(path)
             plt.close(figure)
     finally:
