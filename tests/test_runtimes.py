@@ -59,6 +59,8 @@ def test_each_url_opens_its_runtime_with_its_own_options(tmp_path):
     assert open_runtime("tcp://127.0.0.1:5760").url == "mavlink+tcp://127.0.0.1:5760"
     with pytest.raises(RuntimeUrlError, match="no runtime for bogus: URLs"):
         open_runtime("bogus:x")
+    with pytest.raises(RuntimeUrlError, match="must be NAME=VALUE"):
+        open_runtime("sitl:x?speedup")
     with pytest.raises(RuntimeOptionError, match="speedup: does not apply to the sim: runtime"):
         open_runtime("sim:", {"speedup": 3.0})
     with pytest.raises(RuntimeOptionError, match="must be within 0.1..1000"):

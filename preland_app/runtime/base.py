@@ -109,7 +109,11 @@ def split_url(url: str) -> tuple[str, str, dict[str, str]]:
     if not sep or not scheme.replace("_", "").replace("-", "").isalnum():
         raise RuntimeUrlError(f"{url!r}: expected SCHEME:..., e.g. sim:, sitl:PATH or mavlink+udp://:14550")
     target, _, query = rest.partition("?")
-    return scheme.lower(), target, dict(parse_qsl(query, keep_blank_values=True, strict_parsing=bool(query)))
+    try:
+        options = dict(parse_qsl(query, keep_blank_values=True, strict_parsing=bool(query)))
+    except ValueError:
+        raise RuntimeUrlError(f"{url!r}: the options after ? must be NAME=VALUE joined by &") from None
+    return scheme.lower(), target, options
 
 
 def mavlink_url(address: str) -> str:
