@@ -267,7 +267,8 @@ def test_the_report_marks_fitted_and_held_out_scenarios_and_what_the_fit_could_n
         section = fidelity_section(summaries, spec_text=stored_text, source_path=source)
         write_report(store, "tiny_cal", tmp_path / "report")
     assert "profile `fit` (named by the campaign)" in section
-    rows = {line.split(" | ")[0].strip("| "): line.split(" | ") for line in section.splitlines()
+    table = section.split("### Tests per scenario")[0]  # the fidelity table, before the tests' own
+    rows = {line.split(" | ")[0].strip("| "): line.split(" | ") for line in table.splitlines()
             if line.startswith("| gps") or line.startswith("| irlock")}
     assert rows["gps"][1] == "fitted" and rows["irlock"][1] == "held out"
     gps_errors = summaries[0].errors_cm()
@@ -305,7 +306,10 @@ def _summary(label, errors_cm, *, published_cm):
 
     return SimpleNamespace(
         scenario=label, source="sim", reference=SimpleNamespace(min_error_cm=None),
-        published=[SimpleNamespace(error_cm=e) for e in published_cm], errors_cm=lambda: errors_cm,
+        published=[SimpleNamespace(error_cm=e, landing_time_s=22.0) for e in published_cm],
+        errors_cm=lambda: errors_cm,
+        trials=[{"outcome": "landed", "landing_error_cm": e, "landing_time_s": 20.0} for e in errors_cm],
+        landed=[{"outcome": "landed", "landing_error_cm": e, "landing_time_s": 20.0} for e in errors_cm],
         published_max_error_cm=lambda: max(published_cm),
         published_avg_error_cm=lambda: sum(published_cm) / len(published_cm),
         avg_landing_time_s=lambda: 20.0, published_avg_landing_time_s=lambda: 22.0)

@@ -21,8 +21,8 @@ from .tools import browser
 pytestmark = pytest.mark.xdist_group("docs-site")
 
 # The pictures the build makes (docs/figures/), each linked from at least one page.
-FIGURES = ("mission", "data-flow", "report-errors", "report-positions", "report-trajectory", "pad-thesis",
-           "pad-paper", "cautious-states", "module-map")
+FIGURES = ("mission", "data-flow", "report-errors", "report-positions", "report-trajectory", "report-ecdf",
+           "pad-thesis", "pad-paper", "cautious-states", "module-map")
 HISTORY_WORDS = re.compile(r"this stop|previous stop|the version before|last stop", re.IGNORECASE)
 
 

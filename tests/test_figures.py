@@ -22,8 +22,8 @@ def test_png_at_300_dpi_by_default_and_vector_formats(tmp_path):
     result = report(db, tmp_path / "png")
     assert result.exit_code == 0, result.output
     pngs = sorted((tmp_path / "png").glob("*.png"))
-    assert [p.name for p in pngs] == ["thesis_table3_errors.png", "thesis_table3_positions.png",
-                                      "thesis_table3_trajectory.png"]
+    assert [p.name for p in pngs] == ["thesis_table3_ecdf.png", "thesis_table3_errors.png",
+                                      "thesis_table3_positions.png", "thesis_table3_trajectory.png"]
     for path in pngs:
         with Image.open(path) as image:
             assert round(image.info["dpi"][0]) == 300 and image.width >= 7 * 300
@@ -32,7 +32,7 @@ def test_png_at_300_dpi_by_default_and_vector_formats(tmp_path):
         assert round(image.info["dpi"][0]) == 120
     assert report(db, tmp_path / "pdf", "--format", "pdf").exit_code == 0
     pdfs = sorted((tmp_path / "pdf").glob("*.pdf"))
-    assert len(pdfs) == 3 and all(p.read_bytes()[:5] == b"%PDF-" for p in pdfs)
+    assert len(pdfs) == 4 and all(p.read_bytes()[:5] == b"%PDF-" for p in pdfs)
     assert "thesis_table3_errors.pdf" in (tmp_path / "pdf" / "thesis_table3.md").read_text()
     result = report(db, tmp_path / "x", "--format", "gif")
     assert result.exit_code == 2 and "--format" in result.stderr

@@ -20,6 +20,7 @@ from pathlib import Path
 import yaml
 
 from ..sim.profile import ProfileSpec, ScenarioScore
+from .fidelity_tests import verdicts_section
 from .stats import describe
 
 
@@ -184,5 +185,5 @@ def fidelity_section(summaries, *, spec_text: str | None, source_path: str) -> s
     unsettled = sum(1 for row in rows if "95 % CI" in row[10])
     lines += ["", f"{inside} of {judged} simulated means inside the published min..max"
               + (f"; for {unsettled} of the {judged}, the mean's 95 % CI reaches across an end of the range."
-                 if unsettled else ".")]
-    return "\n".join(lines) + "\n"
+                 if unsettled else ".") + " The range is a column, not a verdict: the tests below judge."]
+    return "\n".join(lines) + "\n" + verdicts_section(summaries)

@@ -203,6 +203,40 @@ def landing_positions_scatter(campaign: str, summaries: list[ScenarioSummary], o
     return out
 
 
+def error_ecdfs(campaign: str, summaries: list[ScenarioSummary], out: Path, *, dpi: int) -> Path | None:
+    """One panel per simulated scenario with published trials: the simulated landing errors' empirical CDF
+    (a step curve) and the field trials as points on their own ECDF; None when no scenario has field trials."""
+    import numpy as np
+
+    chosen = [s for s in summaries if s.source == "sim" and s.published and s.errors_cm()]
+    if not chosen:
+        return None
+    columns = min(3, len(chosen))
+    rows = math.ceil(len(chosen) / columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(3.6 * columns, 2.7 * rows), squeeze=False)
+    for ax, summary in zip(axes.flat, chosen):
+        simulated = np.sort(summary.errors_cm())
+        field = np.sort([p.error_cm for p in summary.published])
+        ax.step(np.concatenate([[0.0], simulated]), np.arange(len(simulated) + 1) / len(simulated), where="post",
+                color="tab:blue", lw=1.2, label=f"simulated ({len(simulated)})")
+        ax.plot(field, np.arange(1, len(field) + 1) / len(field), "^", color="tab:orange", ms=5,
+                label=f"field ({len(field)})")
+        ax.set_title(summary.scenario, fontsize=9)
+        ax.set_xlabel("landing error (cm)", fontsize=8)
+        ax.set_ylabel("fraction of trials", fontsize=8)
+        ax.set_ylim(0, 1.02)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=7, loc="lower right")
+    for ax in list(axes.flat)[len(chosen):]:
+        ax.set_visible(False)
+    figure.suptitle(f"{campaign}: landing errors, simulated (step curve) against the field trials (points)",
+                    fontsize=10)
+    figure.tight_layout(rect=(0, 0, 1, 0.95))
+    figure.savefig(out, dpi=dpi)
+    plt.close(figure)
+    return out
+
+
 def write_figures(store: ResultsStore, campaign: str, summaries: list[ScenarioSummary], out_dir: Path, *,
                   figure_format: str = "png", dpi: int | None = None,
                   trial: tuple[str, int] | None = None) -> list[Path]:
@@ -217,4 +251,5 @@ def write_figures(store: ResultsStore, campaign: str, summaries: list[ScenarioSu
         path = trajectory_figure(store, chosen, out_dir / f"{campaign}_trajectory{suffix}", dpi=dpi)
         if path is not None:
             figures.append(path)
-    return figures
+    ecdfs = error_ecdfs(campaign, summaries, out_dir / f"{campaign}_ecdf{suffix}", dpi=dpi)
+    return figures + ([ecdfs] if ecdfs is not None else [])
