@@ -88,8 +88,11 @@ def area_floor(simulated: Sequence[float], n_field: int, rng: np.random.Generato
 
 
 def spearman(a: Sequence[float], b: Sequence[float]) -> float:
+    """Spearman's rho; NaN when either side is constant (no ranking to compare)."""
     from scipy.stats import spearmanr
 
+    if len(set(a)) < 2 or len(set(b)) < 2:
+        return math.nan
     return float(spearmanr(list(a), list(b)).statistic)
 
 
