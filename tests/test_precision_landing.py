@@ -11,6 +11,7 @@ from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
 from preland_app.vehicle.types import FlightMode, LandingTarget
 
+from .conftest import ROOT
 from .test_sim_autopilot import CALM, airborne, fly
 
 
@@ -100,4 +101,35 @@ def test_raw_estimator_option_also_lands_on_the_pad(thesis_mission):
 
     mission = replace(thesis_mission, params={"PLND_EST_TYPE": 0})
     outcome = run_trial(TrialRequest(mission=mission, seed=4, land_mode="irlock", record_trajectory=False))
+    assert outcome.outcome is Outcome.LANDED and outcome.landing_error_cm < 15.0
+
+
+def test_a_measurement_that_is_not_a_number_is_dropped_not_fused():
+    # One NaN fused into the estimator's filter made the LAND position target NaN for good.
+    import math as _math
+
+    from preland_app.sim.params import ParameterTable
+    from preland_app.sim.precland import PrecisionLandingEstimator
+    from preland_app.vehicle.types import LandingTarget
+
+    estimator = PrecisionLandingEstimator(ParameterTable())
+    estimator.record_pose(0.0, north_m=0.0, east_m=0.0, height_m=5.0, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0)
+    estimator.record_pose(0.05, north_m=0.0, east_m=0.0, height_m=5.0, roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0)
+    bad = LandingTarget(timestamp_s=0.05, angle_x_rad=_math.nan, angle_y_rad=0.0, distance_m=None)
+    assert estimator.handle(0.05, bad) is False and estimator.measurements_dropped == 1
+    good = LandingTarget(timestamp_s=0.05, angle_x_rad=0.1, angle_y_rad=0.0, distance_m=None)
+    assert estimator.handle(0.05, good) is True
+    north, east = estimator.relative_position_m(0.05)
+    assert _math.isfinite(north) and east > 0.4  # 5 m * tan(0.1 rad) to the right
+
+
+def test_the_marker_trial_whose_pose_fit_came_back_nan_now_lands():
+    # thesis_fidelity.yaml's "Marker / none" trial 77 (seed 151972701): solvePnP returned "ok" with NaNs at
+    # 2 m, the NaN reading reached the estimator, and the trial ended as an error.
+    from preland_app.campaign.spec import load_campaign, resolve_scenarios
+
+    campaign = load_campaign(ROOT / "campaigns" / "thesis_fidelity.yaml")
+    (scenario,) = [s for s in resolve_scenarios(campaign) if s.spec.label == "Marker / none"]
+    outcome = run_trial(TrialRequest(mission=scenario.mission, seed=151972701,
+                                     takeoff_altitude_rel_m=scenario.takeoff_altitude_rel_m, record_trajectory=False))
     assert outcome.outcome is Outcome.LANDED and outcome.landing_error_cm < 15.0

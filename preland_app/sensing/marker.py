@@ -214,7 +214,8 @@ class MarkerDetector:
                 image_points = found.astype(np.float64) + shift
             ok, rvec, tvec = cv2.solvePnP(self._object_points[marker_id], image_points, self._k, self._dist,
                                           flags=cv2.SOLVEPNP_IPPE_SQUARE)
-            if not ok or tvec[2, 0] <= 0:
+            # A degenerate fit (corners nearly collinear after refinement) can come back "ok" with NaNs.
+            if not ok or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()) or tvec[2, 0] <= 0:
                 continue
             rotation, _ = cv2.Rodrigues(rvec)
             center = rotation @ self._pad_center_local[marker_id] + tvec.ravel()

@@ -120,8 +120,8 @@ class PrecisionLandingEstimator:
 
     def handle(self, now_s: float, target: LandingTarget) -> bool:
         """Fuse one measurement received at `now_s`; False when it was dropped (older than 1 s by its
-        timestamp, or pointing above the horizon). Its pose is the one PLND_LAG before `now_s`."""
-        if now_s - target.timestamp_s > MEASUREMENT_MAX_AGE_S:
+        timestamp, not a number, or pointing above the horizon). Its pose is the one PLND_LAG before `now_s`."""
+        if now_s - target.timestamp_s > MEASUREMENT_MAX_AGE_S or not _finite(target):
             self.measurements_dropped += 1
             return False
         lag_s = min(max(self.params.value("PLND_LAG"), PLND_LAG_MIN_S), PLND_LAG_MAX_S)
@@ -200,6 +200,13 @@ class PrecisionLandingEstimator:
         if rel is None:
             return None
         return vehicle_north_m + rel[0], vehicle_east_m + rel[1]
+
+
+def _finite(target: LandingTarget) -> bool:
+    """Whether a measurement's angles (and distance, when it has one) are numbers: one NaN fused would make
+    the estimate, and so the vehicle's position target, NaN for good."""
+    values = (target.angle_x_rad, target.angle_y_rad) + (() if target.distance_m is None else (target.distance_m,))
+    return all(math.isfinite(v) for v in values)
 
 
 def _body_to_ned(vector_frd: tuple[float, float, float], pose: _PoseSample) -> tuple[float, float, float]:
