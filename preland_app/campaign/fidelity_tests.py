@@ -199,7 +199,7 @@ def verdicts_section(summaries) -> str:
             f"{t.sim_landed}/{t.sim_trials} ({low:.0%}..{high:.0%})")) + " |")
     rejected = [t.scenario for t in tests if t.verdict == "rejected"]
     lines += ["", f"{len(tests) - len(rejected)} of {len(tests)} scenarios consistent with the field"
-              + (f"; rejected: {', '.join(rejected)}." if rejected else ".")]
+              + (f"; rejected: {'; '.join(rejected)}." if rejected else ".")]
     chosen = [s for s in summaries if s.source == "sim" and s.published and s.errors_cm()]
     if len(chosen) >= 3:
         rho = spearman([float(np.mean(s.errors_cm())) for s in chosen],
@@ -211,6 +211,6 @@ def verdicts_section(summaries) -> str:
                           "(the means tie)."]
         else:
             lines += ["", f"Spearman's rank correlation of the {len(chosen)} scenarios' mean errors, simulated "
-                          f"against field: {rho:.2f}; its noise ceiling (the field's trials resampled against their "
-                          f"own means): median {median:.2f}, 5th percentile {low:.2f}."]
+                          f"against field: {rho:.3f}; its noise ceiling (the field's trials resampled against their "
+                          f"own means): median {median:.3f}, 5th percentile {low:.3f}."]
     return "\n".join(lines) + "\n"
