@@ -85,12 +85,12 @@ def trial_request(mission: MissionSpec | str | os.PathLike, *, seed: int = 1, la
 def fly(mission: MissionSpec | str | os.PathLike, *, seed: int = 1, land: str | None = None,
         land_params: Mapping[str, Any] | None = None, sensor: str | None = None,
         faults: Mapping[str, str] | None = None, takeoff_altitude_m: float | None = None,
-        runtime: str | None = None, options: Mapping[str, Any] | None = None, connect: str | None = None,
+        runtime: Any = None, options: Mapping[str, Any] | None = None, connect: str | None = None,
         sitl: str | os.PathLike | None = None, sitl_speedup: float | None = None, truth: bool | None = None,
         record_trajectory: bool = True, tlog_name: str | None = None) -> TrialOutcome:
     """Fly one trial of `mission` (a MissionSpec or a mission file) and return its outcome.
 
-    `runtime`: a runtime URL (see `preland_app.runtime.base`): `sim:` (default; the embedded simulator in
+    `runtime`: a runtime URL (see `preland_app.runtime.base`), or a Runtime already opened: `sim:` (default; the embedded simulator in
     virtual time, much faster than real time: hundreds of times without a camera, tens of times with one),
     `sitl:PATH` (a fresh ArduPilot SITL `arducopter` process), `mavlink+udpout://127.0.0.1:14550` (`preland
     sim serve`, a SITL already running, a drone). `options`: the runtime's options by name (an option it
@@ -104,7 +104,6 @@ def fly(mission: MissionSpec | str | os.PathLike, *, seed: int = 1, land: str | 
     hand-over to the land mode to touchdown), `flight_time_s`, `details`, `events` and, with
     `record_trajectory`, `trajectory` (columns `TRAJECTORY_COLUMNS`: s, m)."""
     from .errors import SpecValueError
-    from .runtime.base import open_runtime
 
     spec = _mission(mission)
     try:
@@ -113,9 +112,21 @@ def fly(mission: MissionSpec | str | os.PathLike, *, seed: int = 1, land: str | 
     except SpecValueError as error:  # an override that does not fit: name it as the file's field would be
         raise SpecError(path=spec.source_path or spec.name, field=f"land.{error.field}", problem=error.problem) \
             from None
-    chosen = open_runtime(runtime_url(runtime, connect=connect, sitl=sitl),
-                          _shorthand_options(options, sitl_speedup=sitl_speedup, truth=truth))
+    chosen = _runtime(runtime, connect=connect, sitl=sitl,
+                      options=_shorthand_options(options, sitl_speedup=sitl_speedup, truth=truth))
     return _blocking(lambda: chosen.fly(request, tlog_name=tlog_name))
+
+
+def _runtime(runtime, *, connect, sitl, options: dict[str, Any]):
+    """`runtime` as a Runtime: an object already opened (no options then), else the URL it or a shorthand
+    names, opened with `options`."""
+    from .runtime.base import open_runtime
+
+    if runtime is not None and not isinstance(runtime, str):
+        if connect is not None or sitl is not None or options:
+            raise ValueError("an opened runtime takes no shorthands or options: give them to open_runtime")
+        return runtime
+    return open_runtime(runtime_url(runtime, connect=connect, sitl=sitl), options)
 
 
 def _shorthand_options(options: Mapping[str, Any] | None, *, sitl_speedup: float | None,
@@ -139,14 +150,14 @@ class CampaignRun:
 
 
 def run_campaign(campaign: CampaignSpec | str | os.PathLike, *, db: str | os.PathLike = "results.db",
-                 workers: int | None = None, resume: bool = False, runtime: str | None = None,
+                 workers: int | None = None, resume: bool = False, runtime: Any = None,
                  options: Mapping[str, Any] | None = None, sitl: str | os.PathLike | None = None,
                  sitl_speedup: float | None = None, progress: Callable[[int, int, Any], None] | None = None,
                  executor: str = "local", ray_address: str | None = None, trial_cpus: float = 1.0,
                  outcomes_only: bool = False) -> CampaignRun:
     """Run a campaign (a CampaignSpec or a campaign file) into the SQLite store `db`.
 
-    `runtime`: where every trial flies, a runtime URL as for `fly` (default: the campaign file's
+    `runtime`: where every trial flies, a runtime URL or a Runtime as for `fly` (default: the campaign file's
     `runtime:`, else `sim:`), with `options` (the runtime's, by name); `sitl=PATH` and `sitl_speedup` are
     shorthands. A runtime that flies one vehicle (`mavlink+...`) flies the trials one after another: more
     than one worker, or another executor than `local`, is refused.
@@ -163,11 +174,13 @@ def run_campaign(campaign: CampaignSpec | str | os.PathLike, *, db: str | os.Pat
     from .campaign.driver import run_campaign as execute
     from .campaign.executors import ExecutorOptions, create_executor, executor_factory
     from .campaign.store import ResultsStore
-    from .runtime.base import RuntimeOptionError, open_runtime
+    from .runtime.base import RuntimeOptionError
 
     spec = campaign if isinstance(campaign, CampaignSpec) else load_campaign(campaign)
-    chosen = open_runtime(runtime_url(runtime, sitl=sitl) or spec.runtime,
-                          _shorthand_options(options, sitl_speedup=sitl_speedup, truth=None))
+    if runtime is None and sitl is None:
+        runtime = spec.runtime
+    chosen = _runtime(runtime, connect=None, sitl=sitl,
+                      options=_shorthand_options(options, sitl_speedup=sitl_speedup, truth=None))
     if chosen.max_workers is not None:
         if executor != "local":
             raise RuntimeOptionError(option="executor", runtime=chosen.url,

@@ -235,3 +235,26 @@ def test_fly_the_api_and_a_campaign_fly_over_mavlink_against_sim_serve(thesis_mi
     rows = _rows(tmp_path / "m.db")
     assert [(row["runtime"], row["source"], row["outcome"]) for row in rows] == [("mavlink", "sim", "landed")] * 2
     assert all(row["landing_error_cm"] < 15.0 for row in rows)
+
+
+def test_a_runtime_urls_own_options_reach_the_trial_from_fly_and_a_campaign(tmp_path, sitl_stand_in, monkeypatch):
+    # The command line opens the runtime to check it; the trial must fly on that object, query options kept.
+    import preland_app.runtime.sitl as sitl
+    from preland_app.outcome import Outcome, TrialOutcome
+
+    flown = []
+
+    def fake_trial(request, *, options, tlog_name=None):
+        flown.append(options)
+        return TrialOutcome(outcome=Outcome.LANDED, message="landed", seed=request.seed, mission="m",
+                            land_mode="normal", takeoff_altitude_rel_m=10.0, scoring_reference="takeoff")
+
+    monkeypatch.setattr(sitl, "run_sitl_trial", fake_trial)
+    url = f"sitl:{sitl_stand_in}?speedup=3.5&defaults={tmp_path / 'extra.parm'}"
+    result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--runtime", url, "--json"])
+    assert result.exit_code == 0, result.output
+    campaign = _campaign(tmp_path, "trials: 1\nscenarios: [{label: gps, land: normal}]\n")
+    result = CliRunner().invoke(app, ["campaign", "run", campaign, "--db", str(tmp_path / "s.db"), "--quiet",
+                                      "--workers", "1", "--runtime", url])
+    assert result.exit_code == 0, result.output
+    assert [(o.speedup, o.defaults) for o in flown] == [(3.5, ((tmp_path / "extra.parm").resolve(),))] * 2

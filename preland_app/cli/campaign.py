@@ -97,7 +97,8 @@ def campaign_run(
     chosen = choose_runtime(runtime if runtime is not None or sitl is not None else campaign.runtime,
                             connect=None, sitl=sitl, options=options) \
         if not getattr(factory, "runs_elsewhere", False) else None
-    url = chosen.url if chosen is not None else api.runtime_url(runtime, sitl=sitl)
+    # On this machine the runtime is opened (and checked) here; on a cluster the nodes resolve it.
+    target = chosen if chosen is not None else api.runtime_url(runtime, sitl=sitl)
     started = time.perf_counter()
     failures: list[str] = []
     try:
@@ -107,7 +108,8 @@ def campaign_run(
                 if record is not None and record.result.get("outcome") == "error":
                     failures.append(f"{record.scenario} #{record.trial_index}: {record.result.get('message')}")
 
-            run = api.run_campaign(campaign, db=db, workers=workers, resume=resume, runtime=url, options=options,
+            run = api.run_campaign(campaign, db=db, workers=workers, resume=resume, runtime=target,
+                                   options=options if chosen is None else None,
                                    progress=progress, executor=executor, ray_address=ray_address,
                                    trial_cpus=trial_cpus, outcomes_only=outcomes_only)
     except CampaignInterrupted as error:

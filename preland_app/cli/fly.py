@@ -229,8 +229,7 @@ def fly(
         _check_record_target(record_to, campaign_name, scenario_label)
     try:
         outcome = api.fly(mission, seed=seed, land=land, sensor=sensor, faults=faults,
-                          takeoff_altitude_m=takeoff_altitude_m, record_trajectory=False, runtime=chosen.url,
-                          options={name: value for name, value in given.items() if value is not None},
+                          takeoff_altitude_m=takeoff_altitude_m, record_trajectory=False, runtime=chosen,
                           tlog_name=tlog.name if tlog else None)
     except RuntimeOptionError as error:
         raise fail(runtime_option_line(error)) from None
