@@ -21,8 +21,9 @@ campaign: $(STAMP)
 fly: $(STAMP)
 	$(VENV)/bin/preland fly missions/thesis_square_land.yaml
 
+# Each test module on one worker (--dist loadfile): the Ray tests then share one local Ray instance.
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -n 4 --dist loadgroup
+	$(VENV)/bin/python -m pytest -q -n 4 --dist loadfile
 
 # Builds the docs site into site/ (strict: a broken link or a missing page fails).
 # The two variables silence the notices MkDocs plugins print about MkDocs 2 (see docs/contributing.md).

@@ -138,6 +138,16 @@ def run_virtual(main: Coroutine[Any, Any, T]) -> T:
         return runner.run(main)
 
 
+def join(clock: Clock) -> None:
+    """The running task reads sensors on `clock`: on a clock in lock-step with a simulator
+    (`vehicle.paced_clock.PacedClock`) time stands still while the task is not sleeping on it, until the
+    task ends, so the vehicle waits for its readings; on any other clock, nothing. A task that goes on to
+    wait for other tasks should read its sensors in a task of its own."""
+    joining = getattr(clock, "join", None)
+    if joining is not None:
+        joining()
+
+
 async def wait_until(
     predicate: Callable[[], Awaitable[bool]],
     *,

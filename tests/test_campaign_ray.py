@@ -27,11 +27,9 @@ from preland_app.runtime.sitl import SITL_ENV, SitlOptions, SitlRuntime
 from .conftest import ROOT
 from .test_campaign import QUICK, comparable, write_campaign
 
-# One local Ray instance for the whole session: the module runs on one xdist worker (its group), and a
-# session-wide instance is not stopped and restarted each time that worker's queue interleaves other modules'
-# tests with these (a start costs about 15 s).
-pytestmark = [pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find Ray's processes"),
-              pytest.mark.xdist_group("ray")]
+# One local Ray instance for the whole session: `make test` hands each module to one xdist worker
+# (--dist loadfile), so this module's tests share it (a start costs about 15 s).
+pytestmark = pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find Ray's processes")
 
 ROW = ("scenario", "trial_index", "seed", "outcome", "message")
 NODE_SITL = "/bin/false"  # the SITL binary this test's Ray node advertises: one that exits at once

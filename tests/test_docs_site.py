@@ -18,7 +18,6 @@ import yaml
 from .conftest import ROOT
 from .tools import browser
 
-pytestmark = pytest.mark.xdist_group("docs-site")
 
 # The pictures the build makes (docs/figures/), each linked from at least one page.
 FIGURES = ("mission", "data-flow", "report-errors", "report-positions", "report-trajectory", "report-ecdf",

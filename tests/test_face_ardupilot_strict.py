@@ -20,6 +20,7 @@ from preland_app.sim.simulator import Simulator
 
 from .conftest import THESIS_MISSION
 from .test_mavlink_face import command, free_port, serving, wait_for
+from .waiting import until
 
 EMBEDDED_ONLY = ("PRL_LOST_HOLD", "PRL_RET_ALT", "PRL_FS_HOLD")
 
@@ -207,8 +208,7 @@ def test_poshold_is_accepted_and_holds_position():
         assert heartbeat.base_mode & mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
         start = simulator.true_pose()
         start_s = simulator.time_s
-        while simulator.time_s < start_s + 10.0:  # ten simulated seconds
-            time.sleep(0.05)
+        until(lambda: simulator.time_s >= start_s + 10.0, timeout_s=120, what="ten simulated seconds")
         end = simulator.true_pose()
     assert ((end.north_m - start.north_m) ** 2 + (end.east_m - start.east_m) ** 2) ** 0.5 < 0.5
     assert abs(end.down_m - start.down_m) < 0.5 and not end.on_ground

@@ -17,7 +17,8 @@ from preland_app.sim.spec import NavigationSpec
 from preland_app.vehicle.types import FlightMode
 
 from .conftest import ROOT
-from .test_mavlink_runtime import ServedSimulator
+from .test_mavlink_runtime import PATIENCE_S, ServedSimulator
+from .waiting import until_async
 
 
 class BlankCamera:
@@ -121,9 +122,11 @@ def test_a_pilot_mode_change_stops_the_mission_within_a_vehicle_second(thesis_mi
 
     async def main():
         trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=thesis_mission, seed=3), url=served.url))
-        while served.simulator.autopilot.landed_state().name != "IN_AIR":
-            await asyncio.sleep(0.05)
-        await asyncio.sleep(0.5)
+        await until_async(lambda: served.simulator.autopilot.landed_state().name == "IN_AIR" or trial.done(),
+                          timeout_s=PATIENCE_S, what="the vehicle to take off")
+        take_off_s = served.simulator.time_s
+        await until_async(lambda: served.simulator.time_s > take_off_s + 2.0 or trial.done(), timeout_s=PATIENCE_S,
+                          what="two vehicle seconds of flight")
         changed = asyncio.get_running_loop().create_future()
 
         def pilot():
@@ -131,8 +134,8 @@ def test_a_pilot_mode_change_stops_the_mission_within_a_vehicle_second(thesis_mi
             changed.get_loop().call_soon_threadsafe(changed.set_result, served.simulator.time_s)
 
         served.loop.call_soon_threadsafe(pilot)
-        changed_at = await changed
-        outcome = await asyncio.wait_for(trial, timeout=30)
+        changed_at = await asyncio.wait_for(changed, timeout=PATIENCE_S)
+        outcome = await asyncio.wait_for(trial, timeout=PATIENCE_S)
         return outcome, changed_at, served.simulator.time_s, served.simulator.autopilot.mode
 
     try:
@@ -172,10 +175,9 @@ def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(the
     mission_path.write_text(text.replace("  mode: normal", "  mode: marker").replace(
         "pad:\n", "params:\n  PLND_ENABLED: 1\n  PLND_TYPE: 1\npad:\n").replace(
         "preset: thesis", "preset: thesis"))
-    # Real time, as in the field: the camera renders, detects and records 30 frames per wall second, which a
-    # 2-core machine running other tests beside it keeps up with (the preflight refuses a camera below 80 %
-    # of its rate; at 3x, 90 frames per wall second, it measured 18.5 frames/s with other tests running).
-    served = ServedSimulator(thesis_mission, seed=2, speedup=1.0)
+    # In lock-step: the camera renders, detects and records each frame at its vehicle time, so the preflight's
+    # frame-rate check (80 % of the camera's rate) holds however loaded the machine is.
+    served = ServedSimulator(thesis_mission, seed=2, paced=True)
     served.simulator.params.set("PLND_ENABLED", 1)
     served.simulator.params.set("PLND_TYPE", 1)
     db, log, video = tmp_path / "field.db", tmp_path / "detections.csv", tmp_path / "flight.mkv"
@@ -183,7 +185,7 @@ def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(the
         result = CliRunner().invoke(app, [
             "fly", str(mission_path), "--connect", served.url, "--detections-log", str(log), "--record-video",
             str(video), "--record-to", str(db), "--campaign", "field_day", "--scenario", "Marker / none", "--new",
-            "--json"], input="7.5\n5\n-5.5\n")
+            "--paced", "--json"], input="7.5\n5\n-5.5\n")
     finally:
         served.stop()
     assert result.exit_code == 0, result.output

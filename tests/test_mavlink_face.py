@@ -11,14 +11,41 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from preland_app.clock_scaled import ScaledWallClock
+from preland_app.mavlink.dialect import decode_frame, encode_frame
+from preland_app.sim import mavlink_face
 from preland_app.sim.mavlink_face import MavlinkFace, MavlinkFaceError, parse_listen
 from preland_app.sim.params import ARDUPILOT_PARAM_NAMES
 from preland_app.sim.simulator import Simulator
 from preland_app.sim.spec import EnvironmentSpec, WindSpec
 
+from .waiting import until
+
 # 8x: what these tests reached when they asked 10x, before the face kept to its clock; a true 10x
 # beside the real-time field flight left its camera behind its frame rate.
 SPEEDUP = 8.0
+
+
+def pace(client, time_ms: int) -> None:
+    """A companion's PRELAND_PACE grant, sent raw (pymavlink's compiled dialect does not know it)."""
+    client.write(encode_frame("PRELAND_PACE", {"target_system": 1, "target_component": 1, "time_boot_ms": time_ms},
+                              system_id=client.mav.srcSystem, component_id=190))
+
+
+def held_at_ms(client, *, timeout_s: float = 10.0) -> tuple[int, object]:
+    """The face's PRELAND_PACE answer (the time it holds at, ms) and the SIM_STATE sent just before it."""
+    deadline = time.monotonic() + timeout_s
+    sim_state = None
+    while time.monotonic() < deadline:
+        message = client.recv_match(blocking=True, timeout=0.2)
+        if message is None:
+            continue
+        if message.get_type() == "SIM_STATE":
+            sim_state = message
+        elif message.get_type().startswith("UNKNOWN_"):
+            fields = decode_frame("PRELAND_PACE", bytes(message.get_msgbuf()))
+            if fields is not None:
+                return fields["time_boot_ms"], sim_state
+    raise AssertionError(f"no PRELAND_PACE answer within {timeout_s} s")
 
 
 def free_port() -> int:
@@ -28,7 +55,8 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def serving(channels: int, *, speedup: float = SPEEDUP, params: dict[str, float] | None = None):
+def serving(channels: int, *, speedup: float = SPEEDUP, params: dict[str, float] | None = None,
+            paced: bool = False):
     """A face on `channels` free localhost ports, run in a thread with its own event loop; yields one
     pymavlink client per port, the simulator and the face."""
     ports = [free_port() for _ in range(channels)]
@@ -41,7 +69,7 @@ def serving(channels: int, *, speedup: float = SPEEDUP, params: dict[str, float]
     def run():
         asyncio.set_event_loop(loop)
         face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=speedup),
-                           listen=[f"udp:127.0.0.1:{port}" for port in ports])
+                           listen=[f"udp:127.0.0.1:{port}" for port in ports], paced=paced)
         face_box["face"] = face
         face_box["task"] = loop.create_task(face.run())
         started.set()
@@ -139,7 +167,7 @@ def test_arm_take_off_and_land_over_mavlink(served):
     denied = command(client, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1, texts=texts)
     assert denied.result == mavlink2.MAV_RESULT_DENIED  # no position estimate yet
     assert any("Need Position Estimate" in text for text in texts)
-    time.sleep(3.5 / SPEEDUP + 0.2)
+    until(lambda: simulator.nav.position_ok, timeout_s=60, what="the simulator's position estimate")
     assert command(client, mavlink2.MAV_CMD_DO_SET_MODE, 1, 4).result == mavlink2.MAV_RESULT_ACCEPTED
     assert command(client, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink2.MAV_RESULT_ACCEPTED
     assert command(client, mavlink2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 5).result == mavlink2.MAV_RESULT_ACCEPTED
@@ -184,7 +212,7 @@ def test_a_ground_station_watches_on_its_own_channel_while_the_companion_flies()
         # The companion flies; the ground station sees it armed in GUIDED, then climbing.
         # GUIDED is refused until the position estimate is ready (3.5 vehicle seconds), which a loaded machine
         # reaches late in wall time: ask again, as a ground station does, for up to 10 s.
-        time.sleep(3.5 / SPEEDUP + 0.2)
+        until(lambda: simulator.nav.position_ok, timeout_s=60, what="the simulator's position estimate")
         deadline = time.monotonic() + 10.0
         while (result := command(companion, mavlink2.MAV_CMD_DO_SET_MODE, 1, 4).result) != \
                 mavlink2.MAV_RESULT_ACCEPTED and time.monotonic() < deadline:
@@ -240,3 +268,46 @@ def test_the_face_keeps_to_its_clock_when_sleeps_overshoot():
     # Sleeping a step after every step ran 1.5x slower than the clock; steps due at fixed times keep up.
     assert face.simulator.time_s >= 5.0
     assert abs(face.simulator.time_s - clock.now_s()) <= 2 * face.simulator.dt_s
+
+
+def test_a_paced_face_holds_at_time_zero_steps_to_each_grant_and_answers_with_the_truth_of_that_time():
+    with serving(1, paced=True) as ((client,), simulator, face_box):
+        wait_for(client, "HEARTBEAT")  # sent while it holds, a wall half second apart
+        assert simulator.time_s == 0.0
+        pace(client, 250)
+        held_ms, sim_state = held_at_ms(client)
+        assert held_ms == 250 and simulator.time_s == pytest.approx(0.25)
+        assert sim_state is not None and sim_state.lat == pytest.approx(simulator.origin.latitude_deg)
+        pace(client, 1255)  # between two physics steps: the first step at or after it
+        assert held_at_ms(client)[0] == 1260
+        until(lambda: face_box["face"].pace_holds == 2, timeout_s=10, what="the second hold")
+        assert simulator.time_s == pytest.approx(1.26)  # and no further, however long we look
+        pace(client, 0)  # let go: a paced face holds where it is until the next companion
+        wait_for(client, "HEARTBEAT")
+        assert simulator.time_s == pytest.approx(1.26)
+
+
+def test_a_free_face_runs_on_its_clock_until_paced_and_again_when_let_go():
+    with serving(1) as ((client,), simulator, face_box):
+        wait_for(client, "HEARTBEAT", condition=lambda m: simulator.time_s > 0.5)
+        pace(client, 1)  # behind the face: it holds at once, where it is
+        held_ms, _ = held_at_ms(client)
+        assert held_ms / 1000 == pytest.approx(simulator.time_s, abs=1e-3) and held_ms > 500
+        pace(client, 0)
+        until(lambda: simulator.time_s > held_ms / 1000 + 0.5, timeout_s=30, what="the face to run free again")
+
+
+def test_a_face_whose_companion_has_gone_runs_free_after_the_wall_bound(monkeypatch):
+    monkeypatch.setattr(mavlink_face, "PACE_RELEASE_WALL_S", 0.3)
+    with serving(1) as ((client,), simulator, face_box):
+        wait_for(client, "HEARTBEAT")
+        pace(client, 1)
+        held_ms, _ = held_at_ms(client)
+        texts = []
+        deadline = time.monotonic() + 30
+        while not any("pacing released" in t for t in texts) and time.monotonic() < deadline:
+            message = client.recv_match(type="STATUSTEXT", blocking=True, timeout=0.2)
+            if message is not None:
+                texts.append(message.text)  # and nothing sent meanwhile: the companion is silent
+        assert any("pacing released" in t for t in texts)
+        until(lambda: simulator.time_s > held_ms / 1000 + 0.5, timeout_s=30, what="the face to run free")

@@ -302,18 +302,11 @@ def test_modes_lists_installed_plugins_in_aligned_columns(proportional_installed
     assert "preland-broken 1.0" in rows["broken"] and "cannot be loaded: cannot import 'preland_gone'" in rows["broken"]
 
 
-@pytest.mark.xdist_group("camera_in_real_time")
 def test_the_example_plugin_lands_through_the_mavlink_face(proportional_installed, thesis_mission):
-    from preland_app.runtime.mavlink import fly_mavlink
+    from .test_mavlink_runtime import fly_paced
 
-    from .test_mavlink_runtime import CAMERA_SPEEDUP, ServedSimulator
-
-    served = ServedSimulator(thesis_mission, seed=1, speedup=CAMERA_SPEEDUP)  # the camera in real time
-    try:
-        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=thesis_mission, seed=1, land_mode="proportional"),
-                                          url=served.url))
-    finally:
-        served.stop()
+    # In lock-step: the plugin's camera frames at their vehicle times however loaded the machine is.
+    outcome, served = fly_paced(thesis_mission, seed=1, land_mode="proportional")
     assert outcome.outcome is Outcome.LANDED, outcome.message
     truth = served.simulator.touchdowns()[-1]
     expected_cm = 100 * ((truth.north_m - 2.0) ** 2 + truth.east_m ** 2) ** 0.5  # from SIM_STATE, as in-process

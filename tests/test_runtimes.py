@@ -111,6 +111,8 @@ FLY_REFUSALS = [
     (["--no-preflight"], "sim:", "--no-preflight: does not apply to the sim: runtime"),
     (["--detections-log", "d.csv"], "sim:", "--detections-log: does not apply to the sim: runtime"),
     (["--record-video", "v.mkv"], "sim:", "--record-video: does not apply to the sim: runtime"),
+    (["--paced"], "sim:", "--paced: does not apply to the sim: runtime"),
+    (["--paced"], "sitl:{sitl}", "--paced: does not apply to the sitl: runtime"),
     (["--record-to", "r.db", "--campaign", "c", "--scenario", "s"], "sim:", "--record-to: only for a vehicle"),
     (["--campaign", "c"], "sim:", "--campaign: only with --record-to"),
     (["--camera", "0"], "sitl:{sitl}", "--camera: does not apply to the sitl: runtime"),
@@ -146,6 +148,7 @@ CAMPAIGN_REFUSALS = [
     (["--tlog-dir", "tlogs"], "sim:", "--tlog: does not apply to the sim: runtime"),
     (["--no-truth"], "sim:", "--no-truth: does not apply to the sim: runtime"),
     (["--no-preflight"], "sitl:{sitl}", "--no-preflight: does not apply to the sitl: runtime"),
+    (["--paced"], "sim:", "--paced: does not apply to the sim: runtime"),
     (["--workers", "2"], "mavlink+udpout://127.0.0.1:14550", "--workers: mavlink+udpout://127.0.0.1:14550 is one "
                                                              "vehicle: its trials fly one at a time"),
 ]
@@ -214,21 +217,21 @@ def test_a_runtime_from_an_installed_package_flies_a_campaign(tmp_path, monkeypa
     assert all(d["replayed"] is True for d in details)
 
 
-@pytest.mark.xdist_group("sim-serve")
 def test_fly_the_api_and_a_campaign_fly_over_mavlink_against_sim_serve(thesis_mission, tmp_path):
-    served = ServedSimulator(thesis_mission, seed=4)
+    served = ServedSimulator(thesis_mission, seed=4, paced=True)
     url = f"mavlink+udpout://127.0.0.1:{served.port}"
+    paced = {"preflight": False, "paced": True}
     try:
         cli = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--land", "irlock", "--runtime", url,
-                                       "--no-preflight", "--json"])
+                                       "--no-preflight", "--paced", "--json"])
         assert cli.exit_code == 0, cli.output
         data = json.loads(cli.stdout)
         assert data["outcome"] == "landed" and data["landing_error_cm"] < 15.0
-        assert data["details"]["runtime"] == "mavlink"
-        api = preland.fly(thesis_mission, land="irlock", runtime=url, options={"preflight": False})
+        assert data["details"]["runtime"] == "mavlink" and data["details"]["paced_grants"] > 1000
+        api = preland.fly(thesis_mission, land="irlock", runtime=url, options=paced)
         assert api.outcome.value == "landed" and api.landing_error_cm < 15.0
         campaign = _campaign(tmp_path, "trials: 2\nscenarios: [{label: ir, land: irlock}]\n")
-        run = preland.run_campaign(campaign, db=tmp_path / "m.db", runtime=url, options={"preflight": False})
+        run = preland.run_campaign(campaign, db=tmp_path / "m.db", runtime=url, options=paced)
         assert (run.ran, run.total) == (2, 2)
     finally:
         served.stop()

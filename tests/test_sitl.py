@@ -130,8 +130,8 @@ def test_an_interrupted_sitl_campaign_leaves_no_sitl_process(fake_sitl, tmp_path
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=30)
     assert process.returncode == 130, stderr
-    time.sleep(1.0)
-    assert [launch["pid"] for launch in _launches(logs) if _alive(launch["pid"])] == []
+    for launch in _launches(logs):
+        _wait_dead(launch["pid"])
 
 
 def _run_in_thread(function):
@@ -149,6 +149,23 @@ def _wait_for_launch(logs: Path, timeout_s: float = 30.0) -> dict:
             return launches[0]
         time.sleep(0.05)
     raise AssertionError("SITL was not launched")
+
+
+def _wait_airborne(logs: Path, launch: dict, timeout_s: float = 120.0) -> None:
+    """Until the stand-in's vehicle is in the air (its PID.airborne file), however loaded the machine is."""
+    deadline = time.monotonic() + timeout_s
+    while not (logs / f"{launch['pid']}.airborne").exists():
+        if time.monotonic() > deadline or not _alive(launch["pid"]):
+            raise AssertionError(f"the stand-in's vehicle was not airborne within {timeout_s:g} s")
+        time.sleep(0.05)
+
+
+def _wait_dead(pid: int, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while _alive(pid):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"SITL process {pid} still alive after {timeout_s:g} s")
+        time.sleep(0.05)
 
 
 def test_without_copter_defaults_the_stand_in_refuses_to_arm_as_arducopter_does(fake_sitl, thesis_mission, tmp_path):
@@ -218,9 +235,7 @@ def test_sitl_killed_mid_trial_ends_the_trial_as_error_naming_the_exit(fake_sitl
     pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
                                                          options=SitlOptions(binary=script, speedup=3.0)))
     launch = _wait_for_launch(logs)
-    # Stopped in flight: a loaded machine takes a few seconds to start the stand-in and arm, and the
-    # flight lasts about 17 s of wall time at 3x.
-    time.sleep(6.0)  # airborne by then
+    _wait_airborne(logs, launch)  # stopped in flight
     os.kill(launch["pid"], signal.SIGKILL)
     outcome = future.result(timeout=60)
     pool.shutdown()
@@ -236,9 +251,7 @@ def test_sitl_that_stops_answering_ends_as_link_lost_in_bounded_time(fake_sitl, 
     pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
                                                          options=SitlOptions(binary=script, speedup=3.0)))
     launch = _wait_for_launch(logs)
-    # Stopped in flight: a loaded machine takes a few seconds to start the stand-in and arm, and the
-    # flight lasts about 17 s of wall time at 3x.
-    time.sleep(6.0)
+    _wait_airborne(logs, launch)  # stopped in flight
     os.kill(launch["pid"], signal.SIGSTOP)
     stopped_at = time.monotonic()
     outcome = future.result(timeout=60)
@@ -246,8 +259,7 @@ def test_sitl_that_stops_answering_ends_as_link_lost_in_bounded_time(fake_sitl, 
     pool.shutdown()
     assert outcome.outcome is Outcome.LINK_LOST, outcome.message
     assert elapsed_s < 20.0
-    time.sleep(0.5)
-    assert not _alive(launch["pid"])
+    _wait_dead(launch["pid"])
 
 
 REAL_SITL = os.environ.get(SITL_ENV)

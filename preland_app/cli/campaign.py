@@ -54,6 +54,9 @@ def campaign_run(
     no_preflight: bool = typer.Option(False, "--no-preflight",
                                       rich_help_panel="MAVLink runtime (mavlink+..., a vehicle)",
                                       help="Skip the preflight checks before each trial."),
+    paced: bool = typer.Option(False, "--paced", rich_help_panel="MAVLink runtime (mavlink+..., a vehicle)",
+                               help="The vehicle is preland sim serve: fly in lock-step with it (PRELAND_PACE), "
+                                    "every sensor reading at its vehicle time however loaded the machine is."),
     executor: Executor = typer.Option("local", "--executor", help="Where trials run: local (worker processes "
                                       "on this machine), ray (tasks of a Ray cluster) or a registered one."),
     ray_address: Optional[str] = typer.Option(None, "--ray-address", metavar="ADDR",
@@ -92,7 +95,7 @@ def campaign_run(
         raise fail(f"--{'ray-address' if ray_address is not None else 'trial-cpus'}: needs --executor ray")
     given = {"speedup": sitl_speedup, "defaults": tuple(p.resolve() for p in sitl_defaults) or None,
              "tlog_dir": str(tlog_dir.resolve()) if tlog_dir else None, "truth": False if no_truth else None,
-             "preflight": False if no_preflight else None}
+             "preflight": False if no_preflight else None, "paced": True if paced else None}
     options = {name: value for name, value in given.items() if value is not None}
     chosen = choose_runtime(runtime if runtime is not None or sitl is not None else campaign.runtime,
                             connect=None, sitl=sitl, options=options) \

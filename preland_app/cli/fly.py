@@ -89,7 +89,8 @@ MAVLINK_PANEL = "MAVLink runtime (mavlink+..., a vehicle)"
 # The command line's name of each runtime option, for one-line refusals.
 OPTION_FLAGS = {"speedup": "--sitl-speedup", "defaults": "--sitl-defaults", "tlog_dir": "--tlog",
                 "fault_listen": "--fault-listen", "truth": "--no-truth", "preflight": "--no-preflight",
-                "camera_source": "--camera", "detection_log": "--detections-log", "video_path": "--record-video"}
+                "camera_source": "--camera", "detection_log": "--detections-log", "video_path": "--record-video",
+                "paced": "--paced"}
 
 
 def runtime_option_line(error) -> str:
@@ -171,6 +172,9 @@ def fly(
                                                      "file instead of the virtual camera."),
     no_preflight: bool = typer.Option(False, "--no-preflight", rich_help_panel=MAVLINK_PANEL,
                                       help="Skip the preflight checks."),
+    paced: bool = typer.Option(False, "--paced", rich_help_panel=MAVLINK_PANEL,
+                               help="The vehicle is preland sim serve: fly in lock-step with it (PRELAND_PACE), "
+                                    "every sensor reading at its vehicle time however loaded the machine is."),
     detections_log: Optional[Path] = typer.Option(None, "--detections-log", rich_help_panel=MAVLINK_PANEL,
                                                   help="Keep every detection in this CSV."),
     record_video: Optional[Path] = typer.Option(None, "--record-video", rich_help_panel=MAVLINK_PANEL,
@@ -205,7 +209,7 @@ def fly(
              "tlog_dir": str(tlog.parent) if tlog else None, "fault_listen": fault_listen,
              "truth": False if no_truth else None, "preflight": False if no_preflight else None,
              "camera_source": camera_source, "detection_log": str(detections_log) if detections_log else None,
-             "video_path": str(record_video) if record_video else None}
+             "video_path": str(record_video) if record_video else None, "paced": True if paced else None}
     chosen = choose_runtime(runtime, connect=connect, sitl=sitl,
                             options={name: value for name, value in given.items() if value is not None})
     mission = _with_wind(mission, wind_m_s=wind_m_s, wind_from_deg=wind_from_deg, runtime=chosen)

@@ -22,7 +22,11 @@ def sim_serve(
                                      help="UDP address to serve on (localhost unless told otherwise). Repeat it "
                                           "for more channels, as ArduPilot's serial ports: one for preland, "
                                           "one for a ground station."),
-    speedup: float = typer.Option(1.0, "--speedup", help="Simulated seconds per wall second."),
+    speedup: float = typer.Option(1.0, "--speedup", help="Simulated seconds per wall second (while no companion "
+                                                         "paces it)."),
+    paced: bool = typer.Option(False, "--paced", help="Hold at time 0 until a companion flying with --paced "
+                                                      "paces it (PRELAND_PACE), and between companions: the same "
+                                                      "seed flies the same trial."),
     seed: int = typer.Option(1, "--seed", help="Simulator seed (wind, GPS error, noise)."),
     mission_file: Optional[Path] = typer.Option(None, "--mission",
                                                 help="Take the environment and parameters from this mission."),
@@ -74,8 +78,9 @@ def sim_serve(
 
     async def main() -> None:
         simulator = Simulator(seed=seed, environment=environment, params=params, initial_yaw_deg=yaw)
-        face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=speedup), listen=listen)
-        typer.echo(f"serving the embedded simulator on {', '.join(listen)} at {speedup:g}x (Ctrl-C to stop)")
+        face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=speedup), listen=listen, paced=paced)
+        pace = "paced by its companion" if paced else f"at {speedup:g}x"
+        typer.echo(f"serving the embedded simulator on {', '.join(listen)} {pace} (Ctrl-C to stop)")
         await face.run()
 
     try:

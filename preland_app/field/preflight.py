@@ -9,6 +9,8 @@ at the expected rate, and, when the mission asks, the pad in view at the start.
 
 from __future__ import annotations
 
+import asyncio
+
 import time
 from dataclasses import dataclass
 
@@ -84,12 +86,19 @@ async def run_preflight(*, vehicle: Vehicle, clock: Clock, spec: PreflightSpec, 
     if camera is not None:
         started_wall = time.monotonic()
         started_s = clock.now_s()
-        frames = []
-        for _ in range(spec.camera_check_frames):
-            frame = await camera.next_frame()
-            if frame is None:
-                break
-            frames.append(frame)
+
+        async def read_frames() -> list:
+            frames = []
+            for _ in range(spec.camera_check_frames):
+                frame = await camera.next_frame()
+                if frame is None:
+                    break
+                frames.append(frame)
+            return frames
+
+        # In a task of its own: a task that reads a camera holds a paced vehicle's time until it ends
+        # (`preland_app.clock.join`), and this one goes on to wait for the whole mission.
+        frames = await asyncio.ensure_future(read_frames())
         elapsed_s = max(clock.now_s() - started_s, 1e-6)
         rate_hz = (len(frames) - 1) / elapsed_s if len(frames) > 1 else 0.0
         expected_hz = camera.camera.frame_rate_hz

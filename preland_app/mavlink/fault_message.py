@@ -1,8 +1,7 @@
 """PRELAND_FAULT_INJECTION (dialect `preland.xml`): the thesis' fault command as a MAVLink 2 message.
 
-The message layout and its CRC extra come from the dialect XML through
-pymavlink's own parser (`pymavlink.generator.mavparse`), so the wire format is
-MAVLink's, byte for byte. A running companion listens for it on a UDP port
+Framed by `preland_app.mavlink.dialect`, so the wire format is MAVLink's, byte
+for byte. A running companion listens for it on a UDP port
 (`--fault-listen`); `preland fault send` sends it there. The thesis' command has
 no acknowledgement; the dialect adds PRELAND_FAULT_ACK, which the companion
 sends back, so a sender knows whether anyone took the command.
@@ -12,20 +11,12 @@ from __future__ import annotations
 
 import asyncio
 import socket
-import struct
 from collections.abc import Callable
-from functools import lru_cache
-from pathlib import Path
-
-from pymavlink.generator import mavcrc, mavparse
 
 from ..errors import PrelandError
+from .dialect import decode_frame, encode_frame
 from .endpoint import EndpointError, parse_endpoint
 from ..sensing.faults import FaultCommand, FaultSyntaxError
-
-DIALECT = Path(__file__).with_name("preland.xml")
-MAGIC_V2 = 0xFD
-_TYPES = {"uint8_t": "B", "uint16_t": "H", "float": "f"}
 
 
 class FaultMessageError(PrelandError):
@@ -37,47 +28,29 @@ ACK_IGNORED = 1
 ACK_TIMEOUT_S = 1.0  # wall seconds a sender waits for PRELAND_FAULT_ACK
 
 
-@lru_cache(maxsize=2)
-def _definition(name: str = "PRELAND_FAULT_INJECTION"):
-    xml = mavparse.MAVXML(str(DIALECT), wire_protocol_version=mavparse.PROTOCOL_2_0)
-    (message,) = [m for m in xml.message if m.name == name]
-    layout = "<" + "".join(_TYPES[field.type] for field in message.ordered_fields)
-    return message.id, message.crc_extra, [f.name for f in message.ordered_fields], layout
-
-
 def encode(command: FaultCommand, *, system_id: int = 255, component_id: int = 190, target_system: int = 0,
            target_component: int = 0, sequence: int = 0) -> bytes:
     """One MAVLink 2 frame carrying `command`."""
     values = {"target_system": target_system, "target_component": target_component, "target": int(command.target),
               "r_drop": float(command.r_drop), "p_keep": command.p_keep, "p_drop": command.p_drop}
-    return _frame("PRELAND_FAULT_INJECTION", values, system_id=system_id, component_id=component_id,
-                  sequence=sequence)
+    return encode_frame("PRELAND_FAULT_INJECTION", values, system_id=system_id, component_id=component_id,
+                        sequence=sequence)
 
 
 def encode_ack(*, target: int, result: int, system_id: int = 1, component_id: int = 191) -> bytes:
     """One MAVLink 2 frame carrying PRELAND_FAULT_ACK."""
-    return _frame("PRELAND_FAULT_ACK", {"target_system": 0, "target_component": 0, "target": target,
-                                        "result": result}, system_id=system_id, component_id=component_id)
+    return encode_frame("PRELAND_FAULT_ACK", {"target_system": 0, "target_component": 0, "target": target,
+                                              "result": result}, system_id=system_id, component_id=component_id)
 
 
 def decode_ack(frame: bytes) -> dict[str, int] | None:
     """The fields of a PRELAND_FAULT_ACK frame, or None when the frame is another message or corrupt."""
-    return _fields("PRELAND_FAULT_ACK", frame)
-
-
-def _frame(name: str, values: dict, *, system_id: int, component_id: int, sequence: int = 0) -> bytes:
-    message_id, crc_extra, names, layout = _definition(name)
-    payload = struct.pack(layout, *(values[name] for name in names))
-    header = struct.pack("<BBBBBBBHB", MAGIC_V2, len(payload), 0, 0, sequence & 0xFF, system_id, component_id,
-                         message_id & 0xFFFF, message_id >> 16)
-    crc = mavcrc.x25crc(header[1:] + payload)
-    crc.accumulate(struct.pack("B", crc_extra))
-    return header + payload + struct.pack("<H", crc.crc)
+    return decode_frame("PRELAND_FAULT_ACK", frame)
 
 
 def decode(frame: bytes) -> FaultCommand | None:
     """The command in a MAVLink 2 frame, or None when the frame is another message or corrupt."""
-    values = _fields("PRELAND_FAULT_INJECTION", frame)
+    values = decode_frame("PRELAND_FAULT_INJECTION", frame)
     if values is None:
         return None
     try:
@@ -85,25 +58,6 @@ def decode(frame: bytes) -> FaultCommand | None:
                             p_drop=values["p_drop"])
     except (FaultSyntaxError, ValueError):
         return None
-
-
-def _fields(name: str, frame: bytes) -> dict | None:
-    message_id, crc_extra, names, layout = _definition(name)
-    if len(frame) < 12 or frame[0] != MAGIC_V2:
-        return None
-    length = frame[1]
-    if len(frame) < 10 + length + 2:
-        return None
-    frame_id = frame[7] | (frame[8] << 8) | (frame[9] << 16)
-    if frame_id != message_id:
-        return None
-    crc = mavcrc.x25crc(frame[1:10 + length])
-    crc.accumulate(struct.pack("B", crc_extra))
-    if struct.unpack("<H", frame[10 + length:12 + length])[0] != crc.crc:
-        return None
-    # MAVLink 2 trims trailing zero bytes from payloads.
-    payload = frame[10:10 + length].ljust(struct.calcsize(layout), b"\0")
-    return dict(zip(names, struct.unpack(layout, payload)))
 
 
 def _address(url: str) -> tuple[str, int]:

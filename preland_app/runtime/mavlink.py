@@ -74,7 +74,7 @@ class SimStateTruth:
 async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, link_timeout_s: float = 5.0,
                       tlog_path: str | None = None, fault_listen: str | None = None, preflight: bool = False,
                       camera_source: str | None = None, frame_source=None, detection_log: str | None = None,
-                      video_path: str | None = None,
+                      video_path: str | None = None, paced: bool = False,
                       companions: Sequence[Callable[[MavlinkVehicle], Awaitable[None]]] = ()) -> TrialOutcome:
     """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time).
     `tlog_path`: write every MAVLink message received to this telemetry log. `fault_listen`: a UDP address
@@ -83,10 +83,12 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     video file) or `frame_source` (any FrameSource) replaces the virtual camera. `detection_log` (CSV) and
     `video_path` keep every detection and every frame the companion saw. `companions`: coroutines run beside
     the trial from the start (a SITL watchdog, a GPS-error driver); one that raises ends the trial with that
-    error."""
+    error. `paced`: the vehicle is preland's simulator, flown in lock-step (PRELAND_PACE): every sensor reading
+    at its vehicle time however slow this machine is."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
-    vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path)
+    vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path,
+                             paced=paced)
     clock = vehicle.clock
     events = EventLog(clock)
     side_tasks = [asyncio.ensure_future(companion(vehicle)) for companion in companions]
@@ -187,6 +189,8 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     details = dict(runner.report.landing.details) if runner.report.landing else {}
     details["runtime"] = "mavlink"
     details["clock_rate"] = round(clock.rate, 2)
+    if paced:
+        details["paced_grants"] = clock.grants
     # Sensor ticks that gave nothing because no SIM_STATE had come since the last reading.
     waits = [getattr(source, "ticks_without_new_truth", None) for source in (sensors.camera, sensors.irlock)]
     if any(count is not None for count in waits):
@@ -258,7 +262,9 @@ class MavlinkOptions:
     instead of the virtual camera; `detection_log` (CSV), `video_path`: keep every detection and frame;
     `tlog_dir`: keep one MAVLink telemetry log per trial there; `fault_listen`: a UDP address for the
     thesis' fault command during the flight; `link_timeout_s`: vehicle seconds without a HEARTBEAT before
-    the link counts as lost."""
+    the link counts as lost; `paced`: the vehicle is preland's simulator (`preland sim serve`), flown in
+    lock-step with the companion (PRELAND_PACE), so every camera frame and IR-LOCK reading is made at its
+    vehicle time however loaded the machine is (refused at connect by anything else)."""
 
     truth: bool = True
     preflight: bool = True
@@ -268,6 +274,7 @@ class MavlinkOptions:
     tlog_dir: str | None = None
     fault_listen: str | None = None
     link_timeout_s: float = 5.0
+    paced: bool = False
 
 
 @dataclass(frozen=True)
@@ -305,7 +312,7 @@ class MavlinkRuntime:
         return run_mavlink_trial(request, url=self.endpoint.url, truth=o.truth, link_timeout_s=o.link_timeout_s,
                                  tlog_path=tlog_path, fault_listen=o.fault_listen, preflight=o.preflight,
                                  camera_source=o.camera_source, detection_log=o.detection_log,
-                                 video_path=o.video_path)
+                                 video_path=o.video_path, paced=o.paced)
 
     def on_this_machine(self) -> "MavlinkRuntime":
         return self

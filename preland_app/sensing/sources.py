@@ -11,7 +11,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 
-from ..clock import Clock
+from ..clock import Clock, join
 from .camera import CameraModel
 from .irlock import IrLockModel
 from .readings import TargetReading
@@ -72,6 +72,7 @@ class VirtualFrameSource:
         return self._truth.waits
 
     async def next_frame(self) -> RenderedFrame | None:
+        join(self._clock)
         while True:
             tick = await _sleep_to_next_tick(self._clock, self.camera.frame_period_s)
             # Stamped with the time of the pose it shows, as a real camera stamps its exposure.
@@ -106,6 +107,7 @@ class IrLockSource:
         return self._truth.waits if self._truth is not None else 0
 
     async def next_reading(self) -> TargetReading | None:
+        join(self._clock)
         await _sleep_to_next_tick(self._clock, self._period_s)
         now_s = self._clock.now_s()
         pose_time_s = self._pose_time_s()

@@ -25,6 +25,18 @@ AP_Param::set_float keeps; parameters ArduPilot lacks are neither served nor
 accepted; a read or set of an unknown name gets no answer; SYS_STATUS reports
 sensors as ArduCopter does with no fence; and a UDP port another process
 already holds is refused rather than silently shared.
+
+Pacing: the face runs on its clock (wall time times a speed-up) until a preland
+companion sends PRELAND_PACE. From then on the companion owns time: the face
+steps, without waiting for its clock, until the simulated time reaches the
+time granted, sends the SIM_STATE of that moment and a PRELAND_PACE saying
+where it holds, and holds (serving messages, and a HEARTBEAT a wall second)
+until a later grant comes. So a companion that renders and detects camera
+frames in wall time sees each frame at its vehicle time however loaded the
+machine is. A grant of 0, or PACE_RELEASE_WALL_S without a word from the
+companion's port (it has gone), lets the face run free again; a face made
+`paced` (`sim serve --paced`) holds instead, from time 0 until the first grant
+and between companions, so the same seed flies the same trial.
 """
 
 from __future__ import annotations
@@ -34,12 +46,14 @@ import errno
 import math
 import os
 import socket
+import time
 from collections.abc import Sequence
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from ..clock import Clock
+from ..mavlink.dialect import decode_frame, encode_frame, message_id
 from ..mavlink.endpoint import EndpointError, parse_endpoint
 from ..errors import CommandDenied, PrelandError
 from ..geo import GeoPoint, LocalTangentPlane
@@ -50,6 +64,16 @@ from .simulator import Simulator
 
 os.environ.setdefault("MAVLINK20", "1")
 
+# Paced: the companion port has said nothing (MAVSDK alone sends a HEARTBEAT a second) for this long: it
+# has gone, and the face runs free again.
+PACE_RELEASE_WALL_S = 10.0
+# Paced and holding: the face wakes when a datagram comes, or after this many wall seconds to look at the
+# time (a HEARTBEAT each HOLD_HEARTBEAT_WALL_S, the release bound).
+HOLD_WAIT_WALL_S = 0.1
+HOLD_HEARTBEAT_WALL_S = 0.5
+# Paced steps between two yields to the event loop (the face shares it with nothing in `sim serve`).
+PACED_STEPS_PER_YIELD = 20
+_PACE_TYPE = f"UNKNOWN_{message_id('PRELAND_PACE')}"  # pymavlink's compiled dialect does not know it
 # Vehicle seconds the face may fall behind its clock and still make them up by stepping without sleeping.
 MAX_BEHIND_S = 0.5
 _STREAMS_DEFAULT_HZ = {mavlink2.MAVLINK_MSG_ID_HEARTBEAT: 1.0}
@@ -139,10 +163,11 @@ class MavlinkFace(GroundStationServices):
     """Serves one `Simulator` over MAVLink on a clock (wall time times a speed-up in practice).
 
     `listen`: one address or several (one channel each), `udp:HOST:PORT` or `udpclient:HOST:PORT`.
+    `paced`: hold at time 0 until a companion paces it, and hold again when one lets go (see the module).
     """
 
     def __init__(self, *, simulator: Simulator, clock: Clock, listen: str | Sequence[str] = "udp:127.0.0.1:14550",
-                 system_id: int = 1) -> None:
+                 system_id: int = 1, paced: bool = False) -> None:
         self.simulator = simulator
         self.clock = clock
         addresses = (listen,) if isinstance(listen, str) else tuple(listen)
@@ -164,6 +189,15 @@ class MavlinkFace(GroundStationServices):
         self.landing_targets = 0
         self._param_names = ARDUPILOT_PARAM_NAMES
         self._status_sent = 0
+        # Pacing (PRELAND_PACE): the time granted (s; None: free), the channel that grants it, whether the
+        # face has said it holds there, and when that channel was last heard (monotonic wall s).
+        self.paced = paced
+        self.pace_until_s: float | None = simulator.time_s if paced else None
+        self._pace_channel: _Channel | None = None
+        self._pace_answered = True
+        self._pace_heard_wall_s = 0.0
+        self._held_heartbeat_wall_s = 0.0
+        self.pace_holds = 0  # how many times it held for a companion
 
     # ---------------------------------------------------------------- running
 
@@ -185,8 +219,19 @@ class MavlinkFace(GroundStationServices):
         # quarter millisecond takes more than that) is made up by the next steps: sleeping dt after every
         # step ran the face at 2.25x when asked for 3x, and at 8x whatever it was asked above that.
         due_s = self.clock.now_s()
+        paced_steps = 0
         try:
             while True:
+                if self.pace_until_s is not None:
+                    if sim.time_s < self.pace_until_s - 1e-9:
+                        paced_steps += 1
+                        if paced_steps % PACED_STEPS_PER_YIELD == 0:
+                            await asyncio.sleep(0)
+                        self._step_and_serve()
+                    else:
+                        await self._hold()
+                        due_s = self.clock.now_s()  # free again later: from then, not catching up
+                    continue
                 due_s += dt_s
                 wait_s = due_s - self.clock.now_s()
                 if wait_s > 0:
@@ -195,24 +240,87 @@ class MavlinkFace(GroundStationServices):
                     if wait_s < -MAX_BEHIND_S:
                         due_s = self.clock.now_s()  # far behind (a loaded machine): slow down, don't race
                     await asyncio.sleep(0)
-                sim.step()
-                for channel in self.channels:
-                    self._channel = channel
-                    self._receive_all()
-                self._flush_status_text()
-                for channel in self.channels:
-                    if channel.peer_seen:
-                        self._channel = channel
-                        self._send_streams()
+                self._step_and_serve()
         finally:
             self._close()
+
+    def _step_and_serve(self) -> None:
+        self.simulator.step()
+        self._receive_everywhere()
+        self._flush_status_text()
+        for channel in self.channels:
+            if channel.peer_seen:
+                self._channel = channel
+                self._send_streams()
+
+    def _receive_everywhere(self) -> None:
+        for channel in self.channels:
+            self._channel = channel
+            self._receive_all()
+
+    async def _hold(self) -> None:
+        """At the granted time: say so once (SIM_STATE, then PRELAND_PACE), then serve until a later grant."""
+        channel = self._pace_channel
+        if not self._pace_answered and channel is not None:
+            self._pace_answered = True
+            self.pace_holds += 1
+            self._channel = channel
+            self._send_sim_state()
+            channel.connection.write(encode_frame(
+                "PRELAND_PACE", {"target_system": 0, "target_component": 0, "time_boot_ms": self.time_boot_ms()},
+                system_id=channel.mav.srcSystem, component_id=channel.mav.srcComponent))
+        self._receive_everywhere()
+        self._flush_status_text()
+        if self.pace_until_s is None or not self._pace_answered or \
+                self.simulator.time_s < self.pace_until_s - 1e-9:
+            return  # a grant (or a release) came: step, or answer it
+        now_wall_s = time.monotonic()
+        if channel is not None and now_wall_s - self._pace_heard_wall_s > PACE_RELEASE_WALL_S:
+            self._release_pace()
+            self._say(f"pacing released: the companion said nothing for {PACE_RELEASE_WALL_S:g} s")
+            return
+        if now_wall_s - self._held_heartbeat_wall_s >= HOLD_HEARTBEAT_WALL_S:
+            self._held_heartbeat_wall_s = now_wall_s
+            for each in self.channels:
+                if each.peer_seen:
+                    self._channel = each
+                    self._send_heartbeat()
+        await self._readable(HOLD_WAIT_WALL_S)
+
+    async def _readable(self, timeout_s: float) -> None:
+        """Until a datagram waits on any channel, or `timeout_s` wall seconds (no busy polling: in a test the
+        face shares its process, and the interpreter, with the companion it holds for)."""
+        loop = asyncio.get_running_loop()
+        ready = loop.create_future()
+
+        def on_ready() -> None:
+            if not ready.done():
+                ready.set_result(None)
+
+        descriptors = [channel.connection.port.fileno() for channel in self.channels]
+        for descriptor in descriptors:
+            loop.add_reader(descriptor, on_ready)
+        try:
+            await asyncio.wait_for(ready, timeout_s)
+        except TimeoutError:
+            pass
+        finally:
+            for descriptor in descriptors:
+                loop.remove_reader(descriptor)
+
+    def _release_pace(self) -> None:
+        self.pace_until_s = self.simulator.time_s if self.paced else None
+        self._pace_channel = None
+        self._pace_answered = True
 
     def _close(self) -> None:
         for channel in self.channels:
             channel.connection.close()
 
     def time_boot_ms(self) -> int:
-        return int(self.simulator.time_s * 1000) & 0xFFFFFFFF
+        # Rounded: the steps' float sum falls either side of a whole millisecond, and a paced hold must say
+        # the millisecond it was granted.
+        return int(round(self.simulator.time_s * 1000)) & 0xFFFFFFFF
 
     def _receive_all(self) -> None:
         while True:
@@ -223,6 +331,11 @@ class MavlinkFace(GroundStationServices):
             if message is None:
                 return
             self._channel.peer_seen = True
+            if self._channel is self._pace_channel:
+                self._pace_heard_wall_s = time.monotonic()
+            if message.get_type() == _PACE_TYPE:
+                self._on_preland_pace(message)
+                continue
             handler = getattr(self, f"_on_{message.get_type().lower()}", None)
             if handler is not None:
                 handler(message)
@@ -525,6 +638,19 @@ class MavlinkFace(GroundStationServices):
         except CommandDenied as error:
             self._say(error.reason)
 
+    def _on_preland_pace(self, message) -> None:
+        fields = decode_frame("PRELAND_PACE", bytes(message.get_msgbuf()))
+        if fields is None:
+            return
+        if fields["time_boot_ms"] == 0:
+            if self._channel is self._pace_channel:
+                self._release_pace()
+            return
+        self.pace_until_s = fields["time_boot_ms"] / 1000.0
+        self._pace_channel = self._channel
+        self._pace_answered = False
+        self._pace_heard_wall_s = time.monotonic()
+
     def _on_landing_target(self, message) -> None:
         now_s = self.simulator.time_s
         stamp_s = message.time_usec / 1e6
@@ -580,7 +706,7 @@ class MavlinkFace(GroundStationServices):
         self._param_value(name, every_channel=True)  # the value now in force, on every channel, as ArduPilot
 
 
-async def serve(*, simulator: Simulator, clock: Clock, listen: str | Sequence[str]) -> None:
+async def serve(*, simulator: Simulator, clock: Clock, listen: str | Sequence[str], paced: bool = False) -> None:
     """Serve until cancelled."""
-    await MavlinkFace(simulator=simulator, clock=clock, listen=listen).run()
+    await MavlinkFace(simulator=simulator, clock=clock, listen=listen, paced=paced).run()
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import json
 import math
 import threading
@@ -29,8 +30,10 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from ..mavlink.dialect import xml_text
 from ..mavlink.endpoint import parse_endpoint
 from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
+from .paced_clock import PacedClock
 from .tlog import TlogWriter
 from .types import (
     Attitude,
@@ -73,6 +76,11 @@ LINK_LOST_MIN_WALL_S = 0.5
 # Ground truth for the simulated sensors: each of their readings needs a SIM_STATE of its own, and the
 # IR-LOCK reads at 50 Hz.
 SIM_STATE_HZ = 50
+# Paced (PRELAND_PACE): a grant the simulator has not answered within this many wall seconds is sent again
+# (UDP may drop it); the first answer is awaited this long before the vehicle counts as not pacing.
+PACE_RESEND_WALL_S = 0.5
+PACE_FIRST_ANSWER_WALL_S = 5.0
+CLOSE_CALLS_WALL_S = 2.0  # at close, how long MAVSDK calls still running are waited for
 PARAM_TRIES = 3
 PARAM_TIMEOUT_S = 1.5  # wall seconds per try
 FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
@@ -140,10 +148,18 @@ class DaemonCallExecutor(concurrent.futures.ThreadPoolExecutor):
     autopilot which has gone (SITL stopped, a link lost) never sends. preland bounds its own waits for
     such calls; with the loop's default ThreadPoolExecutor, `asyncio.run` would still join the blocked
     thread when the trial ends, and the trial (a campaign worker) would hang there for ever. (A
-    ThreadPoolExecutor only because asyncio accepts no other kind as a loop's default; its pool is unused.)"""
+    ThreadPoolExecutor only because asyncio accepts no other kind as a loop's default; its pool is unused.)
+    The calls not yet returned are kept (`running`): MAVSDK must not be destroyed under one that is sending,
+    which crashes the process."""
+
+    def __init__(self) -> None:
+        super().__init__(max_workers=1)
+        self.running: set[concurrent.futures.Future] = set()
 
     def submit(self, fn, /, *args, **kwargs) -> concurrent.futures.Future:
         future: concurrent.futures.Future = concurrent.futures.Future()
+        self.running.add(future)
+        future.add_done_callback(self.running.discard)
 
         def call() -> None:
             if not future.set_running_or_notify_cancel():
@@ -199,22 +215,31 @@ class _Commanded:
 
 class MavlinkVehicle:
     """A Vehicle over a MAVLink connection URL (udp://:14550, udpout://host:port, tcp://host:port,
-    serial:///dev/ttyAMA0:921600), for ArduPilot Copter."""
+    serial:///dev/ttyAMA0:921600), for ArduPilot Copter. `paced`: the vehicle is preland's simulator and
+    runs in lock-step with this companion (PRELAND_PACE, see `paced_clock`); its clock is then a
+    `PacedClock`, and the ground truth comes with each held time."""
 
     def __init__(self, *, url: str, connect_timeout_s: float = 30.0, link_timeout_s: float = 5.0,
-                 want_truth: bool = False, tlog_path: str | None = None) -> None:
+                 want_truth: bool = False, tlog_path: str | None = None, paced: bool = False) -> None:
         self.url = url
         self.tlog = TlogWriter(tlog_path) if tlog_path else None
         self.connect_timeout_s = connect_timeout_s
         self.link_timeout_s = link_timeout_s
         self.want_truth = want_truth
         self._clock = VehicleTimeClock()
+        self.paced = paced
+        self._paced_clock = PacedClock(grant=self._want_grant) if paced else None
+        self._pace_wanted_ms: int | None = None
+        self._pace_changed = asyncio.Event()
+        self._last_heartbeat_vehicle_s = 0.0
         self._messages: dict[str, dict[str, Any]] = {}
         self._sim_state_time_s = 0.0
+        self._sim_state_fresh = False
         self._status_texts: list[str] = []
         self._last_heartbeat_wall: float | None = None
         self._sdk = None
         self._direct = None
+        self._executor: DaemonCallExecutor | None = None
         self._param_types: dict[str, int] = {}  # name -> MAV_PARAM_TYPE, as the autopilot declares it
         self._param_values: dict[str, tuple[float, int, int]] = {}  # name -> (value, type, receipt number)
         self._param_receipts = 0
@@ -227,8 +252,9 @@ class MavlinkVehicle:
         self._commanded_mode: _Commanded | None = None
 
     @property
-    def clock(self) -> VehicleTimeClock:
-        return self._clock
+    def clock(self) -> VehicleTimeClock | PacedClock:
+        """The vehicle's time: followed (`VehicleTimeClock`), or in lock-step (`PacedClock`)."""
+        return self._paced_clock if self._paced_clock is not None else self._clock
 
     @property
     def connected(self) -> bool:
@@ -243,7 +269,8 @@ class MavlinkVehicle:
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.component_type import ComponentType
 
-        asyncio.get_running_loop().set_default_executor(DaemonCallExecutor())
+        self._executor = DaemonCallExecutor()
+        asyncio.get_running_loop().set_default_executor(self._executor)
         self._sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER))
         try:
             await self._sdk.add_any_connection(mavsdk_connection_url(self.url))
@@ -256,17 +283,57 @@ class MavlinkVehicle:
         self._direct = MavlinkDirectAsync(system)
         self._tasks.append(asyncio.ensure_future(self._listen()))
         deadline = time.monotonic() + self.connect_timeout_s
-        while not self._clock.settled or "HEARTBEAT" not in self._messages:
+        # Paced, the simulator may hold at time 0 (sim serve --paced): its HEARTBEAT is enough.
+        while not (self._clock.settled or self.paced) or "HEARTBEAT" not in self._messages:
             if time.monotonic() > deadline:
                 raise LinkLost(operation="connect", reason="no telemetry from the autopilot")
             await self._request_streams()
             await asyncio.sleep(0.2)
         await self._request_streams()
+        if self._paced_clock is not None:
+            await self._start_pacing()
         self._connected = True
+
+    async def _start_pacing(self) -> None:
+        try:
+            await self._direct.load_custom_xml(xml_text())
+        except Exception as error:
+            raise VehicleError(operation="connect", reason=f"MAVSDK cannot load preland's dialect: {error}") from None
+        self._tasks.append(asyncio.ensure_future(self._pace_sender()))
+        self._paced_clock.start(self._clock.now_s())
+        deadline = time.monotonic() + PACE_FIRST_ANSWER_WALL_S
+        while not self._paced_clock.answers:
+            if time.monotonic() > deadline:
+                raise VehicleError(operation="connect", reason=f"{self.url} does not answer PRELAND_PACE within "
+                                                               f"{PACE_FIRST_ANSWER_WALL_S:g} s: paced flight needs "
+                                                               "preland's simulator (preland sim serve)")
+            await asyncio.sleep(0.01)
+
+    def _want_grant(self, time_ms: int) -> None:
+        """PacedClock's grant: the sender task sends the newest, one at a time, so grants leave in order."""
+        self._pace_wanted_ms = time_ms
+        self._pace_changed.set()
+
+    async def _pace_sender(self) -> None:
+        clock = self._paced_clock
+        sent_ms, sent_wall_s, answers_then = None, 0.0, 0
+        while True:
+            wanted_ms = self._pace_wanted_ms
+            unanswered = clock.answers == answers_then
+            if wanted_ms is not None and (wanted_ms != sent_ms or (
+                    unanswered and time.monotonic() - sent_wall_s > PACE_RESEND_WALL_S)):
+                sent_ms, sent_wall_s, answers_then = wanted_ms, time.monotonic(), clock.answers
+                await self._send_now("PRELAND_PACE", {"time_boot_ms": wanted_ms})
+                continue
+            self._pace_changed.clear()
+            try:
+                await asyncio.wait_for(self._pace_changed.wait(), timeout=PACE_RESEND_WALL_S)
+            except TimeoutError:
+                pass
 
     async def _request_streams(self) -> None:
         streams = dict(STREAMS_HZ)
-        if self.want_truth:
+        if self.want_truth and not self.paced:  # paced: the simulator sends SIM_STATE with each held time
             streams["SIM_STATE"] = SIM_STATE_HZ
         for name, rate_hz in streams.items():
             await self._command(MAV_CMD_SET_MESSAGE_INTERVAL, MESSAGE_IDS[name], 1e6 / rate_hz,
@@ -287,6 +354,7 @@ class MavlinkVehicle:
             self._messages[name] = fields
             if name == "HEARTBEAT":
                 self._last_heartbeat_wall = time.monotonic()
+                self._last_heartbeat_vehicle_s = self.clock.now_s()
                 self._heartbeat_confirms(fields)
             elif name == "PARAM_VALUE":
                 self._param_receipts += 1
@@ -295,6 +363,16 @@ class MavlinkVehicle:
                                                 int(fields.get("param_type", 9)), self._param_receipts)
             elif name == "STATUSTEXT":
                 self._status_texts.append(str(fields.get("text", "")))
+            elif name == "PRELAND_PACE" and self._paced_clock is not None:
+                held_s = int(fields.get("time_boot_ms", 0)) / 1000.0
+                if not self._paced_clock.answers and "HEARTBEAT" in self._messages:
+                    self._last_heartbeat_vehicle_s = held_s  # heard before time meant anything here
+                if self._sim_state_fresh:
+                    self._sim_state_time_s = held_s  # the SIM_STATE sent just before is of the held time
+                    self._sim_state_fresh = False
+                self._paced_clock.held(held_s)
+            elif name == "SIM_STATE" and self._paced_clock is not None:
+                self._sim_state_fresh = True  # stamped by the held time that follows it
             elif name == "SIM_STATE":
                 # SIM_STATE has no timestamp: the clock when it is read. The clock runs from the wall time at
                 # which the newest time_boot_ms was read, so a backlog read late still reads as old.
@@ -312,19 +390,37 @@ class MavlinkVehicle:
     def _check_link(self, operation: str) -> None:
         if self._closed or self._direct is None:
             raise VehicleError(operation=operation, reason="not connected")
-        if self._last_heartbeat_wall is not None:
+        if self._paced_clock is not None and self._paced_clock.started:
+            # In lock-step the vehicle's time passes only when this companion grants it, so silence is vehicle
+            # time; a simulator that stops answering at all is the paced clock's to find (a wall bound).
+            silent_vehicle_s = self._paced_clock.now_s() - self._last_heartbeat_vehicle_s
+            if silent_vehicle_s > self.link_timeout_s:
+                raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
+        elif self._last_heartbeat_wall is not None:
             silent_wall_s = time.monotonic() - self._last_heartbeat_wall
             silent_vehicle_s = silent_wall_s * self._clock.rate
             if silent_vehicle_s > self.link_timeout_s and silent_wall_s > LINK_LOST_MIN_WALL_S:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
 
     async def close(self) -> None:
+        if self._paced_clock is not None and self._paced_clock.started and self._direct is not None:
+            self._paced_clock.release()
+            try:  # the simulator runs free again at once (else after its own wall bound)
+                await asyncio.wait_for(self._send_now("PRELAND_PACE", {"time_boot_ms": 0}), timeout=2.0)
+            except Exception:  # closing must not fail a trial
+                pass
         self._closed = True
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         if self.tlog is not None:
             self.tlog.close()
+        if self._executor is not None:
+            # Calls still on their threads (a send the cancelled tasks left) finish before MAVSDK is destroyed;
+            # one blocked for good (a command whose final ACK never comes) is left after the bound.
+            deadline = time.monotonic() + CLOSE_CALLS_WALL_S
+            while self._executor.running and time.monotonic() < deadline:
+                await asyncio.sleep(0.005)
         if self._sdk is not None:
             try:
                 await self._sdk.destroy()
@@ -334,7 +430,15 @@ class MavlinkVehicle:
 
     # ---------------------------------------------------------------- sending
 
+    def _holding(self):
+        """In lock-step, the vehicle's time stands still during an exchange with it (as in virtual time)."""
+        return self._paced_clock.holding() if self._paced_clock is not None else contextlib.nullcontext()
+
     async def _send(self, name: str, fields: dict[str, Any], *, targeted: bool = True) -> None:
+        with self._holding():
+            await self._send_now(name, fields, targeted=targeted)
+
+    async def _send_now(self, name: str, fields: dict[str, Any], *, targeted: bool = True) -> None:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         payload = {"target_system": self.system_id, "target_component": 1, **fields} if targeted else dict(fields)
@@ -342,6 +446,10 @@ class MavlinkVehicle:
                                                        target_component_id=1, fields_json=json.dumps(payload)))
 
     async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> None:
+        with self._holding():
+            await self._command_now(command, *params, operation=operation, check=check)
+
+    async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> None:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         values = list(params) + [0.0] * (7 - len(params))
@@ -368,12 +476,12 @@ class MavlinkVehicle:
     async def arm(self) -> None:
         self._check_link("arm")
         await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 1, operation="arm")
-        self._commanded_armed = _Commanded(True, self._clock.now_s())
+        self._commanded_armed = _Commanded(True, self.clock.now_s())
 
     async def disarm(self) -> None:
         self._check_link("disarm")
         await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 0, operation="disarm")
-        self._commanded_armed = _Commanded(False, self._clock.now_s())
+        self._commanded_armed = _Commanded(False, self.clock.now_s())
 
     async def takeoff(self, *, altitude_rel_m: float) -> None:
         self._check_link("takeoff")
@@ -382,7 +490,7 @@ class MavlinkVehicle:
     async def set_mode(self, mode: FlightMode) -> None:
         self._check_link("set_mode")
         await self._command(MAV_CMD_DO_SET_MODE, 1, mode.value, operation="set_mode")
-        self._commanded_mode = _Commanded(mode, self._clock.now_s())
+        self._commanded_mode = _Commanded(mode, self.clock.now_s())
 
     def _home_local(self) -> tuple[float, float, float]:
         home = self._messages.get("HOME_POSITION")
@@ -393,14 +501,14 @@ class MavlinkVehicle:
         hx, hy, hz = self._home_local()
         mask = POSITION_ONLY | (YAW_IGNORED if yaw_deg is None else 0)
         await self._send("SET_POSITION_TARGET_LOCAL_NED", {
-            "time_boot_ms": int(self._clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_LOCAL_NED,
+            "time_boot_ms": int(self.clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_LOCAL_NED,
             "type_mask": mask, "x": hx + position_ned_m.north_m, "y": hy + position_ned_m.east_m,
             "z": hz + position_ned_m.down_m, "yaw": math.radians(yaw_deg or 0.0)})
 
     async def goto_global(self, *, latitude_deg: float, longitude_deg: float, altitude_rel_m: float) -> None:
         self._check_link("goto_global")
         await self._send("SET_POSITION_TARGET_GLOBAL_INT", {
-            "time_boot_ms": int(self._clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+            "time_boot_ms": int(self.clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
             "type_mask": POSITION_ONLY | YAW_IGNORED, "lat_int": int(latitude_deg * 1e7),
             "lon_int": int(longitude_deg * 1e7), "alt": altitude_rel_m})
 
@@ -408,7 +516,7 @@ class MavlinkVehicle:
         self._check_link("set_velocity_ned")
         mask = VELOCITY_ONLY | (YAW_IGNORED if yaw_deg is None else 0)
         await self._send("SET_POSITION_TARGET_LOCAL_NED", {
-            "time_boot_ms": int(self._clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_LOCAL_NED,
+            "time_boot_ms": int(self.clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_LOCAL_NED,
             "type_mask": mask, "vx": velocity_ned_m_s.north_m_s, "vy": velocity_ned_m_s.east_m_s,
             "vz": velocity_ned_m_s.down_m_s, "yaw": math.radians(yaw_deg or 0.0)})
 
@@ -417,7 +525,7 @@ class MavlinkVehicle:
         self._check_link("set_velocity_body")
         mask = VELOCITY_ONLY & ~YAW_RATE_IGNORED
         await self._send("SET_POSITION_TARGET_LOCAL_NED", {
-            "time_boot_ms": int(self._clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_BODY_NED,
+            "time_boot_ms": int(self.clock.now_s() * 1000), "coordinate_frame": MAV_FRAME_BODY_NED,
             "type_mask": mask, "vx": forward_m_s, "vy": right_m_s, "vz": down_m_s,
             "yaw_rate": math.radians(yaw_rate_deg_s)})
 
@@ -432,6 +540,11 @@ class MavlinkVehicle:
     async def _param_exchange(self, name: str, *, operation: str, send: dict[str, Any] | None) -> tuple[float, int]:
         """Send PARAM_SET (`send`) or PARAM_REQUEST_READ and wait for the PARAM_VALUE of `name` that answers it:
         (value, MAV_PARAM_TYPE). ArduPilot answers nothing for a name it lacks."""
+        with self._holding():
+            return await self._param_exchange_now(name, operation=operation, send=send)
+
+    async def _param_exchange_now(self, name: str, *, operation: str,
+                                  send: dict[str, Any] | None) -> tuple[float, int]:
         for _ in range(PARAM_TRIES):
             self._check_link(operation)
             seen = self._param_receipts
@@ -486,7 +599,7 @@ class MavlinkVehicle:
         gps = m.get("GPS_RAW_INT", {})
         distance = m.get("DISTANCE_SENSOR")
         hx, hy, hz = self._home_local()
-        now_s = self._clock.now_s()
+        now_s = self.clock.now_s()
         mode, armed = _heartbeat_mode(heartbeat), _heartbeat_armed(heartbeat)
         if self._commanded_armed is not None:
             armed = self._commanded_armed.reported(armed, now_s)

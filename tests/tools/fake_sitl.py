@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """A stand-in for ArduPilot's `arducopter` SITL binary, for tests: it takes SITL's command line and serves
 preland's embedded simulator over MAVLink to the --serial0 udpclient address. It writes its pid and
-arguments to $FAKE_SITL_LOG_DIR (when set) so tests can check what was launched and that it is gone."""
+arguments to $FAKE_SITL_LOG_DIR (when set) so tests can check what was launched and that it is gone, and a
+PID.airborne file there once the vehicle is in the air."""
 
 import argparse
 import asyncio
@@ -80,6 +81,16 @@ def main() -> None:
             raise CommandDenied(operation="arm", reason="Arm: Motors: Check frame class and type")
 
         simulator.autopilot.arm = refuse
+    if log_dir:
+        # Tests that stop SITL in flight wait for this file instead of guessing a wall time.
+        step, airborne = simulator.step, Path(log_dir, f"{os.getpid()}.airborne")
+
+        def step_and_note() -> None:
+            step()
+            if not airborne.exists() and simulator.autopilot.landed_state().name == "IN_AIR":
+                airborne.write_text(f"{simulator.time_s:.2f}\n")
+
+        simulator.step = step_and_note
     face = SitlFace(simulator=simulator, clock=ScaledWallClock(speedup=args.speedup), listen=args.serial0,
                     sim_values=given)
     asyncio.run(face.run())
