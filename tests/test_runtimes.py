@@ -113,6 +113,8 @@ FLY_REFUSALS = [
     (["--record-video", "v.mkv"], "sim:", "--record-video: does not apply to the sim: runtime"),
     (["--paced"], "sim:", "--paced: does not apply to the sim: runtime"),
     (["--paced"], "sitl:{sitl}", "--paced: does not apply to the sitl: runtime"),
+    (["--sitl-physics", "preland"], "sim:", "--sitl-physics: does not apply to the sim: runtime"),
+    (["--sitl-physics", "preland"], "mavlink+udp://:14550", "--sitl-physics: does not apply to the mavlink+"),
     (["--record-to", "r.db", "--campaign", "c", "--scenario", "s"], "sim:", "--record-to: only for a vehicle"),
     (["--campaign", "c"], "sim:", "--campaign: only with --record-to"),
     (["--camera", "0"], "sitl:{sitl}", "--camera: does not apply to the sitl: runtime"),

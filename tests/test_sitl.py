@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -68,6 +69,8 @@ def test_a_trial_on_sitl_launches_a_fresh_instance_and_stops_it(fake_sitl, thesi
     assert argv[argv.index("-I") + 1] == str(outcome.details["sitl_instance"])
     assert any(a.startswith("--home=-35.363261,149.16523,584") for a in argv)
     assert argv[argv.index("--serial0") + 1].startswith("udpclient:127.0.0.1:")
+    assert argv[argv.index("--model") + 1] == "+" and "--sim-port-out" not in argv
+    assert outcome.details["sitl_physics"] == "ardupilot"
     assert not _alive(launch["pid"])
     # The trial's telemetry log reads back with pymavlink's tools.
     log = mavutil.mavlink_connection(str(tmp_path / "tlogs" / "trial.tlog"))
@@ -111,29 +114,6 @@ def test_a_speedup_out_of_range_gives_one_line(command, fake_sitl, tmp_path):
     assert not list(logs.glob("*.json"))  # no SITL started
 
 
-@pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
-def test_an_interrupted_sitl_campaign_leaves_no_sitl_process(fake_sitl, tmp_path):
-    script, logs = fake_sitl
-    campaign = tmp_path / "c.yaml"
-    campaign.write_text(f"name: sitl_orphans\nmission: {THESIS_MISSION}\ntrials: 4\n"
-                        "scenarios: [{label: gps, land: normal}]\n")
-    process = subprocess.Popen(
-        [sys.executable, "-m", "preland_app.cli", "campaign", "run", str(campaign), "--db", str(tmp_path / "r.db"),
-         "--workers", "2", "--quiet", "--sitl", str(script), "--sitl-speedup", "2"],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env={**os.environ},
-        preexec_fn=as_from_a_terminal)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and len(_launches(logs)) < 2:
-        time.sleep(0.1)
-    launches = _launches(logs)
-    assert len(launches) >= 2, "two SITL processes should be running"
-    process.send_signal(signal.SIGINT)
-    _, stderr = process.communicate(timeout=30)
-    assert process.returncode == 130, stderr
-    for launch in _launches(logs):
-        _wait_dead(launch["pid"])
-
-
 def _run_in_thread(function):
     import concurrent.futures
 
@@ -158,6 +138,24 @@ def _wait_airborne(logs: Path, launch: dict, timeout_s: float = 120.0) -> None:
         if time.monotonic() > deadline or not _alive(launch["pid"]):
             raise AssertionError(f"the stand-in's vehicle was not airborne within {timeout_s:g} s")
         time.sleep(0.05)
+
+
+def _bridge_threads() -> list[str]:
+    return [t.name for t in threading.enumerate() if t.name == "sitl-json-bridge"]
+
+
+def _children() -> list[int]:
+    """The pids of this process's living children (a zombie not yet reaped is not one)."""
+    pids = []
+    for task in Path("/proc/self/task").iterdir():
+        pids += [int(pid) for pid in (task / "children").read_text().split()]
+    return [pid for pid in pids if _alive(pid)]
+
+
+def _answers(logs: Path, launch: dict) -> int:
+    """How many JSON physics answers the stand-in got (0: none noted)."""
+    noted = logs / f"{launch['pid']}.json_answers"
+    return int(noted.read_text()) if noted.exists() else 0
 
 
 def _wait_dead(pid: int, timeout_s: float = 30.0) -> None:
@@ -229,37 +227,61 @@ def test_sitl_gets_a_rangefinder_and_a_per_trial_gps_error(fake_sitl, thesis_mis
     assert files[0].endswith("sitl_copter.parm")
 
 
-@pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
-def test_sitl_killed_mid_trial_ends_the_trial_as_error_naming_the_exit(fake_sitl, thesis_mission):
+def test_the_physics_ardupilot_or_preland_comes_from_the_url_or_the_options(tmp_path):
+    from preland_app.runtime.base import RuntimeOptionError, open_runtime
+    from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS, PACKAGED_DEFAULTS
+
+    assert open_runtime("sitl:x").options.physics == "ardupilot"
+    assert open_runtime("sitl:x?physics=preland").options.physics == "preland"
+    assert open_runtime("sitl:x?speedup=4&physics=ardupilot").options.physics == "ardupilot"
+    assert open_runtime("sitl:x", {"physics": "preland"}).options.physics == "preland"
+    assert open_runtime("sitl:x?physics=preland", {"physics": "ardupilot"}).options.physics == "ardupilot"
+    for url, options in (("sitl:x?physics=bogus", {}), ("sitl:x", {"physics": "JSON"})):
+        with pytest.raises(RuntimeOptionError) as refused:
+            open_runtime(url, options)
+        assert refused.value.option == "physics" and refused.value.runtime == "sitl:"
+        assert "sitl:" in str(refused.value) and "ardupilot, preland" in str(refused.value)
+    # preland's frame follows the copter defaults and comes before the user's files, which win.
+    mine = tmp_path / "mine.parm"
+    binary = tmp_path / "arducopter"
+    assert SitlOptions(binary=binary, defaults=(mine,), physics="preland").defaults_files() == (
+        PACKAGED_DEFAULTS, JSON_QUADX_DEFAULTS, mine)
+    assert SitlOptions(binary=binary, defaults=(mine,)).defaults_files() == (PACKAGED_DEFAULTS, mine)
+    lines = JSON_QUADX_DEFAULTS.read_text().splitlines()
+    params = [line.split() for line in lines if line.strip() and not line.startswith("#")]
+    assert ["FRAME_TYPE", "1"] in params
+    for index, line in enumerate(lines):  # every parameter says why, on the comment line before it
+        if line.strip() and not line.startswith("#"):
+            assert lines[index - 1].startswith("#"), line
+
+
+def test_a_physics_other_than_ardupilot_or_preland_is_refused_in_one_line(fake_sitl):
     script, logs = fake_sitl
-    pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
-                                                         options=SitlOptions(binary=script, speedup=3.0)))
-    launch = _wait_for_launch(logs)
-    _wait_airborne(logs, launch)  # stopped in flight
-    os.kill(launch["pid"], signal.SIGKILL)
-    outcome = future.result(timeout=60)
-    pool.shutdown()
-    assert outcome.outcome is Outcome.ERROR
-    assert "killed by SIGKILL" in outcome.message and "SitlExited" in outcome.message
-    assert any(e.kind == "armed" for e in outcome.events)  # what it recorded before is kept
-    assert not _alive(launch["pid"])
+    result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--runtime", f"sitl:{script}?physics=bogus"])
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.strip().splitlines()
+    assert "physics" in line and "sitl:" in line and "ardupilot, preland" in line and "'bogus'" in line
+    assert not list(logs.glob("*.json"))  # no SITL started
 
 
 @pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
-def test_sitl_that_stops_answering_ends_as_link_lost_in_bounded_time(fake_sitl, thesis_mission):
+def test_a_trial_on_preland_physics_runs_sitl_on_the_json_bridge(fake_sitl, thesis_mission):
     script, logs = fake_sitl
-    pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
-                                                         options=SitlOptions(binary=script, speedup=3.0)))
-    launch = _wait_for_launch(logs)
-    _wait_airborne(logs, launch)  # stopped in flight
-    os.kill(launch["pid"], signal.SIGSTOP)
-    stopped_at = time.monotonic()
-    outcome = future.result(timeout=60)
-    elapsed_s = time.monotonic() - stopped_at
-    pool.shutdown()
-    assert outcome.outcome is Outcome.LINK_LOST, outcome.message
-    assert elapsed_s < 20.0
-    _wait_dead(launch["pid"])
+    outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
+                             options=SitlOptions(binary=script, speedup=STAND_IN_SPEEDUP, physics="preland"))
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    assert outcome.details["sitl_physics"] == "preland"
+    (launch,) = _launches(logs)
+    argv = launch["argv"]
+    assert argv[argv.index("--model") + 1] == "JSON:127.0.0.1"
+    assert int(argv[argv.index("--sim-port-out") + 1]) > 0
+    files = argv[argv.index("--defaults") + 1].split(",")
+    assert files[0].endswith("sitl_copter.parm") and files[1].endswith("sitl_json_quadx.parm")
+    # The stand-in waits for an answer to every servo packet: it flew on answers from the bridge.
+    answered = _answers(logs, launch)
+    assert answered > 100 and outcome.details["sitl_json_packets"] >= answered
+    assert not _alive(launch["pid"]) and _children() == []
+    assert _bridge_threads() == []
 
 
 REAL_SITL = os.environ.get(SITL_ENV)
@@ -293,6 +315,19 @@ def test_the_paper_algorithms_land_on_real_sitl(mode):
     outcome = run_sitl_trial(TrialRequest(mission=mission, seed=1, land_mode=mode), options=_real())
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert outcome.landing_error_cm < 20.0
+
+
+@needs_real_sitl
+@pytest.mark.parametrize("mode", ["normal", "irlock"])
+def test_the_thesis_mission_lands_on_preland_physics_on_real_sitl(thesis_mission, mode):
+    outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=1, land_mode=mode),
+                             options=_real(physics="preland"))
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    assert outcome.details["sitl_physics"] == "preland" and outcome.details["sitl_json_packets"] > 10_000
+    if mode == "irlock":
+        assert outcome.details["landing_targets_sent"] > 50
+        assert outcome.landing_error_cm < 15.0
+    assert _bridge_threads() == [] and _children() == []
 
 
 @needs_real_sitl

@@ -42,6 +42,10 @@ def campaign_run(
         None, "--sitl-speedup", rich_help_panel="SITL runtime (sitl:PATH)",
         help="SITL --speedup (default: 2 for land modes that read camera frames, so the companion keeps the "
              "camera's rate; 10 for the others)."),
+    sitl_physics: Optional[str] = typer.Option(
+        None, "--sitl-physics", metavar="ardupilot|preland", rich_help_panel="SITL runtime (sitl:PATH)",
+        help="SITL's physics: ardupilot (its own, the default) or preland (preland's motor-level quad X over "
+             "SITL's JSON interface, which applies no wind)."),
     sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", rich_help_panel="SITL runtime (sitl:PATH)",
                                              help="More ArduPilot parameter defaults files, repeatable, applied "
                                                   "after the copter defaults (copter.parm of the binary's "
@@ -94,6 +98,7 @@ def campaign_run(
     if executor == "local" and (ray_address is not None or trial_cpus != 1.0):
         raise fail(f"--{'ray-address' if ray_address is not None else 'trial-cpus'}: needs --executor ray")
     given = {"speedup": sitl_speedup, "defaults": tuple(p.resolve() for p in sitl_defaults) or None,
+             "physics": sitl_physics,
              "tlog_dir": str(tlog_dir.resolve()) if tlog_dir else None, "truth": False if no_truth else None,
              "preflight": False if no_preflight else None, "paced": True if paced else None}
     options = {name: value for name, value in given.items() if value is not None}

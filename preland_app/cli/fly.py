@@ -90,7 +90,7 @@ MAVLINK_PANEL = "MAVLink runtime (mavlink+..., a vehicle)"
 OPTION_FLAGS = {"speedup": "--sitl-speedup", "defaults": "--sitl-defaults", "tlog_dir": "--tlog",
                 "fault_listen": "--fault-listen", "truth": "--no-truth", "preflight": "--no-preflight",
                 "camera_source": "--camera", "detection_log": "--detections-log", "video_path": "--record-video",
-                "paced": "--paced"}
+                "paced": "--paced", "physics": "--sitl-physics"}
 
 
 def runtime_option_line(error) -> str:
@@ -156,6 +156,10 @@ def fly(
         None, "--sitl-speedup", rich_help_panel=SITL_PANEL,
         help="SITL --speedup (default: 2 for land modes that read camera frames, so the companion keeps the "
              "camera's rate; 10 for the others)."),
+    sitl_physics: Optional[str] = typer.Option(
+        None, "--sitl-physics", metavar="ardupilot|preland", rich_help_panel=SITL_PANEL,
+        help="SITL's physics: ardupilot (its own, the default) or preland (preland's motor-level quad X over "
+             "SITL's JSON interface, which applies no wind)."),
     sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", rich_help_panel=SITL_PANEL,
                                              help="More ArduPilot parameter defaults files, repeatable, applied "
                                                   "after the copter defaults (copter.parm of the binary's ArduPilot "
@@ -206,6 +210,7 @@ def fly(
     if seed < 0:
         raise fail(f"--seed: must be >= 0, got {seed}")
     given = {"speedup": sitl_speedup, "defaults": tuple(p.resolve() for p in sitl_defaults) or None,
+             "physics": sitl_physics,
              "tlog_dir": str(tlog.parent) if tlog else None, "fault_listen": fault_listen,
              "truth": False if no_truth else None, "preflight": False if no_preflight else None,
              "camera_source": camera_source, "detection_log": str(detections_log) if detections_log else None,

@@ -13,6 +13,13 @@ SIM_GPS_GLITCH_*, which `GpsErrorDriver` then moves along during the flight. SIT
 (`--serial0 udpclient:127.0.0.1:PORT`). The process runs in its own process
 group, dies with the process that launched it (PR_SET_PDEATHSIG), and is
 stopped, group and all, when the trial ends, fails or is interrupted.
+
+The physics is ArduPilot's own (`physics=ardupilot`, `--model +`) or preland's motor-level quad X
+(`physics=preland`): SITL then runs `--model JSON:127.0.0.1` and sends its motors' PWM, each physics
+step, to a `JsonBridge` serving from a thread of the trial's process on a port of its own
+(`--sim-port-out`), which answers with the next state; the frame's parameters (packaged
+sitl_json_quadx.parm) follow the copter defaults. SITL's JSON interface applies no wind, so the
+scenario's SIM_WIND_* do not blow on preland's physics. The bridge is stopped with its SITL.
 """
 
 from __future__ import annotations
@@ -35,6 +42,8 @@ from ..errors import PrelandError
 from ..outcome import TrialOutcome
 from ..sim.navigation import gps_drift
 from ..sim.noise import GaussianStream, child_rng
+from ..sim.json_bridge import JsonBridge, JsonBridgeTimeout
+from ..sim.multirotor import QuadXFrame, QuadXMultirotor
 from ..sim.spec import DEFAULT_HOME, NavigationSpec
 from ..vehicle.mavlink_backend import MavlinkVehicle
 from .base import RuntimeOptionError, TrialRequest, build_options
@@ -46,6 +55,12 @@ STOP_GRACE_S = 3.0
 
 
 PACKAGED_DEFAULTS = Path(__file__).with_name("data") / "sitl_copter.parm"
+# The quad X frame of preland's physics, after the copter defaults (which set SITL's plus frame).
+JSON_QUADX_DEFAULTS = Path(__file__).with_name("data") / "sitl_json_quadx.parm"
+PHYSICS = ("ardupilot", "preland")  # SitlOptions.physics: ArduPilot's own, or preland's over SITL's JSON
+# How long the bridge waits for a servo packet before it stops (wall s). Only the bridge stops: a SITL
+# that died or stalled is the trial's SITL-exit and link-lost handling's to judge, much sooner.
+BRIDGE_PACKET_TIMEOUT_S = 60.0
 COPTER_DEFAULTS_IN_TREE = Path("Tools") / "autotest" / "default_params" / "copter.parm"
 # ArduPilot SITL's rangefinder type (AP_RangeFinder::Type::SIM) and downward orientation (ROTATION_PITCH_270).
 RNGFND_TYPE_SIM = 100
@@ -68,6 +83,10 @@ class SitlError(PrelandError):
 
 class SitlExited(PrelandError):
     """The SITL process ended while its trial was flying."""
+
+
+class PhysicsBridgeFailed(PrelandError):
+    """preland's physics (the JSON bridge) failed while its trial was flying."""
 
 
 def resolve_sitl_binary(path: str | Path | None) -> Path:
@@ -97,8 +116,9 @@ class SitlOptions:
     """How to run SITL: the binary (None: $PRELAND_SITL_BINARY of the machine a trial runs on, as cluster
     nodes each have their own), its --speedup (None: SPEEDUP_CAMERA for a land mode that reads camera
     frames, else SPEEDUP_NO_CAMERA), extra --defaults files (after the copter defaults), extra parameters,
-    a folder for one .tlog per trial (None: no logs), and a UDP address for the thesis' fault command
-    (None: none)."""
+    a folder for one .tlog per trial (None: no logs), a UDP address for the thesis' fault command
+    (None: none), and the physics: `ardupilot` (SITL's own) or `preland` (preland's quad X over SITL's
+    JSON interface)."""
 
     binary: Path | None
     speedup: float | None = None
@@ -106,6 +126,7 @@ class SitlOptions:
     extra_params: dict[str, float] = field(default_factory=dict)
     tlog_dir: Path | None = None
     fault_listen: str | None = None
+    physics: str = "ardupilot"
 
     def speedup_for(self, *, uses_camera: bool) -> float:
         """The --speedup of a trial whose land mode does (or does not) read camera frames."""
@@ -114,8 +135,10 @@ class SitlOptions:
         return SPEEDUP_CAMERA if uses_camera else SPEEDUP_NO_CAMERA
 
     def defaults_files(self) -> tuple[Path, ...]:
-        """copter.parm of the binary's ArduPilot tree (else the packaged copy), then the user's files."""
-        return (find_copter_defaults(self.binary) or PACKAGED_DEFAULTS, *self.defaults)
+        """copter.parm of the binary's ArduPilot tree (else the packaged copy), preland's frame with
+        `physics=preland`, then the user's files (which win)."""
+        frame = (JSON_QUADX_DEFAULTS,) if self.physics == "preland" else ()
+        return (find_copter_defaults(self.binary) or PACKAGED_DEFAULTS, *frame, *self.defaults)
 
     def on_this_machine(self) -> "SitlOptions":
         """These options with the binary checked here: the one given, else this machine's
@@ -129,7 +152,8 @@ SPEEDUP_RANGE = (0.1, 1000.0)
 @dataclass(frozen=True)
 class SitlRuntime:
     """ArduPilot SITL (`sitl:PATH`, `sitl:` for $PRELAND_SITL_BINARY; query `speedup=X`,
-    `defaults=A.parm,B.parm`): a fresh `arducopter` process per trial, scored from its SIM_STATE."""
+    `defaults=A.parm,B.parm`, `physics=ardupilot|preland`): a fresh `arducopter` process per trial,
+    scored from its SIM_STATE."""
 
     scheme: ClassVar[str] = "sitl"
     name: ClassVar[str] = "sitl"
@@ -155,8 +179,10 @@ class SitlRuntime:
                                              problem=f"must be a number, got {text!r}") from None
             elif key == "defaults":
                 values["defaults"] = tuple(Path(part) for part in text.split(",") if part)
+            elif key == "physics":
+                values["physics"] = text
             else:
-                raise RuntimeOptionError(option=key, runtime="sitl:", takes=("speedup", "defaults"),
+                raise RuntimeOptionError(option=key, runtime="sitl:", takes=("speedup", "defaults", "physics"),
                                          problem="not an option of a sitl: URL")
         values.update(options)
         if "binary" in values:
@@ -167,6 +193,10 @@ class SitlRuntime:
         if chosen.speedup is not None and not SPEEDUP_RANGE[0] <= chosen.speedup <= SPEEDUP_RANGE[1]:
             raise RuntimeOptionError(option="speedup", runtime="sitl:",
                                      problem=f"must be within 0.1..1000, got {chosen.speedup:g}")
+        if chosen.physics not in PHYSICS:
+            raise RuntimeOptionError(option="physics", runtime="sitl:",
+                                     problem=f"must be one of {', '.join(PHYSICS)} on the sitl: runtime, "
+                                             f"got {chosen.physics!r}")
         return cls(options=replace(chosen, defaults=tuple(Path(p).resolve() for p in chosen.defaults),
                                    tlog_dir=Path(chosen.tlog_dir).resolve() if chosen.tlog_dir else None))
 
@@ -270,7 +300,7 @@ def _die_with_parent() -> None:
 
 
 class SitlInstance:
-    """One running SITL process (use `async with`)."""
+    """One running SITL process (use `async with`), with its JSON bridge when the physics is preland's."""
 
     def __init__(self, *, options: SitlOptions, params: dict[str, float], home=DEFAULT_HOME,
                  heading_deg: float = 0.0) -> None:
@@ -281,6 +311,7 @@ class SitlInstance:
         self.instance: int | None = None
         self.port = _free_udp_port()
         self.process: subprocess.Popen | None = None
+        self.bridge: JsonBridge | None = None
         self._lock_file = None
         self._folder: tempfile.TemporaryDirectory | None = None
 
@@ -305,22 +336,46 @@ class SitlInstance:
         params_file.write_text("".join(f"{name} {value!r}\n" for name, value in sorted(self.params.items())))
         defaults = ",".join(str(p) for p in (*self.options.defaults_files(), params_file))
         home = f"{self.home.latitude_deg},{self.home.longitude_deg},{self.home.altitude_amsl_m},{self.heading_deg:g}"
-        return [str(self.options.binary), "--model", "+", "--speedup", f"{self.options.speedup:g}",
+        if self.bridge is not None:
+            # SITL sends to 9002 + 10 x instance unless told: the bridge's own port keeps trials apart.
+            model = ["--model", "JSON:127.0.0.1", "--sim-port-out", str(self.bridge.address[1])]
+        else:
+            model = ["--model", "+"]
+        return [str(self.options.binary), *model, "--speedup", f"{self.options.speedup:g}",
                 "--defaults", defaults, "-I", str(self.instance), f"--home={home}",
                 "--serial0", f"udpclient:127.0.0.1:{self.port}"]
+
+    def _start_bridge(self) -> None:
+        # Bound (port 0: the system picks a free one) and serving before SITL starts, so no other trial
+        # can take the port and SITL's first servo packet is answered. The model starts facing the
+        # mission's heading, as SITL's own physics does from --home.
+        model = QuadXMultirotor(frame=QuadXFrame(), yaw_rad=math.radians(self.heading_deg))
+        try:
+            self.bridge = JsonBridge(model=model, port=0, packet_timeout_s=BRIDGE_PACKET_TIMEOUT_S).start()
+        except OSError as error:
+            raise SitlError(f"cannot open the JSON physics port: {error.strerror or error}") from None
 
     async def __aenter__(self) -> "SitlInstance":
         self.instance = self._claim_instance()
         self._folder = tempfile.TemporaryDirectory(prefix=f"preland-sitl-{self.instance}-")
         folder = Path(self._folder.name)
         try:
+            if self.options.physics == "preland":
+                self._start_bridge()
             self.process = subprocess.Popen(self.command(folder), cwd=folder, stdin=subprocess.DEVNULL,
                                             stdout=subprocess.DEVNULL, stderr=open(folder / "stderr.txt", "wb"),
                                             preexec_fn=_die_with_parent)
         except OSError as error:
             self._release()
             raise SitlError(f"cannot start {self.options.binary}: {error.strerror or error}") from None
-        await asyncio.sleep(0.2)
+        except BaseException:
+            self._release()
+            raise
+        try:
+            await asyncio.sleep(0.2)
+        except BaseException:  # interrupted while starting: nothing of the trial is left running
+            self.stop()
+            raise
         if self.process.poll() is not None:
             tail = (folder / "stderr.txt").read_text(errors="replace").strip().splitlines()[-1:] or [""]
             code = self.process.returncode
@@ -344,12 +399,18 @@ class SitlInstance:
         return f"exited with code {code}"
 
     async def watch(self, vehicle: MavlinkVehicle) -> None:
-        """Raise SitlExited as soon as the SITL process ends (its trial cannot go on)."""
+        """Raise SitlExited as soon as the SITL process ends (its trial cannot go on), and
+        PhysicsBridgeFailed when the JSON bridge fails other than by its packet timeout (a bridge that
+        timed out only stopped: SITL's exit or the lost link then ends the trial)."""
         while True:
             ended = self.exit_description()
             if ended is not None:
                 raise SitlExited(f"{self.options.binary.name} (SITL instance {self.instance}) {ended} "
                                  "during the trial")
+            failure = self.bridge.error if self.bridge is not None else None
+            if failure is not None and not isinstance(failure, JsonBridgeTimeout):
+                raise PhysicsBridgeFailed(f"preland's physics for SITL instance {self.instance} failed: "
+                                          f"{type(failure).__name__}: {failure}")
             await asyncio.sleep(0.1)
 
     def stop(self) -> None:
@@ -367,6 +428,8 @@ class SitlInstance:
         self._release()
 
     def _release(self) -> None:
+        if self.bridge is not None:
+            self.bridge.stop()  # joins its thread (bounded); safe to call again
         if self._lock_file is not None:
             self._lock_file.close()
             self._lock_file = None
@@ -393,6 +456,11 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     outcome.details["runtime"] = "sitl"
     outcome.details["sitl_instance"] = sitl.instance
     outcome.details["sitl_speedup"] = options.speedup
+    outcome.details["sitl_physics"] = options.physics
+    if options.physics == "preland":
+        outcome.details["sitl_wind"] = "none: SITL's JSON interface applies no wind"
+    if sitl.bridge is not None:
+        outcome.details["sitl_json_packets"] = sitl.bridge.counters.packets
     outcome.details["sitl_gps_error_cm"] = [round(v * 100.0, 1) for v in gps.error_ned_m]
     return outcome
 

@@ -2,13 +2,23 @@
 """A stand-in for ArduPilot's `arducopter` SITL binary, for tests: it takes SITL's command line and serves
 preland's embedded simulator over MAVLink to the --serial0 udpclient address. It writes its pid and
 arguments to $FAKE_SITL_LOG_DIR (when set) so tests can check what was launched and that it is gone, and a
-PID.airborne file there once the vehicle is in the air."""
+PID.airborne file there once the vehicle is in the air.
+
+With `--model JSON:HOST` it also acts as SITL on its JSON interface: servo packets (a constant PWM just
+below the quad X's hover, so the physics stays on the ground) to HOST at `--sim-port-out` (else 9002 +
+10 x instance) at FRAME_RATE_HZ of its scaled clock, each waited for as SITL waits (resent after 1 wall s),
+and, unlike SITL, which would wait for ever, exits with code 3 naming the missing answer after
+ANSWER_TIMEOUT_S wall s. It writes the answers it got to PID.json_answers (a count). Its flight stays the
+embedded simulator's, served over MAVLink as without JSON."""
 
 import argparse
 import asyncio
 import json
 import os
+import socket
 import sys
+import threading
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
@@ -19,11 +29,52 @@ from preland_app.sim.mavlink_face import MavlinkFace  # noqa: E402
 from preland_app.errors import CommandDenied  # noqa: E402
 from preland_app.sim.params import ARDUCOPTER_PARAMS  # noqa: E402
 from preland_app.sim.simulator import Simulator  # noqa: E402
+from preland_app.sim.multirotor import QuadXFrame  # noqa: E402
+from preland_app.sim.sitl_json import DEFAULT_PORT, build_servo_packet  # noqa: E402
 
 
 # SITL's own parameters that preland writes during a flight (libraries/SITL/SITL.cpp, 4.6: AP_Vector3f,
 # served as three REAL32). The stand-in serves and stores them; its GPS error stays the simulator's own.
 SITL_FLOAT_PARAMS = ("SIM_GPS_GLITCH_X", "SIM_GPS_GLITCH_Y", "SIM_GPS_GLITCH_Z")
+
+
+FRAME_RATE_HZ = 100  # physics steps per scaled second: a few hundred packets per wall s, cheap for CI
+RESEND_S = 1.0  # SIM_JSON::recv_fdm resends the servos after 1 wall s without an answer
+ANSWER_TIMEOUT_S = 5.0  # wall s without an answer before the stand-in gives up (SITL would wait for ever)
+
+
+def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | None) -> None:
+    """SITL's side of the JSON interface, in lock-step: send a servo packet, wait for its answer, next frame."""
+    pwm = [round(QuadXFrame().hover_pwm_us()) - 50] * 4 + [0] * 12
+    answers_file = Path(log_dir, f"{os.getpid()}.json_answers") if log_dir else None
+    answers, noted_at = 0, 0.0
+    frame_wall_s = 1.0 / (FRAME_RATE_HZ * speedup)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.settimeout(RESEND_S)
+        next_at = time.monotonic()
+        for frame_count in range(2**32):
+            packet = build_servo_packet(frame_rate_hz=FRAME_RATE_HZ, frame_count=frame_count, pwm_us=pwm)
+            sent_at = time.monotonic()
+            sock.sendto(packet, (host, port))
+            while True:
+                try:
+                    sock.recv(4096)
+                    break
+                except socket.timeout:
+                    if time.monotonic() - sent_at > ANSWER_TIMEOUT_S:
+                        print(f"fake SITL: no JSON physics answer to servo packet {frame_count} from "
+                              f"{host}:{port} within {ANSWER_TIMEOUT_S:g} s", file=sys.stderr, flush=True)
+                        os._exit(3)
+                    sock.sendto(packet, (host, port))  # the same frame_count again, as SITL resends
+            answers += 1
+            if answers_file is not None and (answers == 1 or sent_at - noted_at > 0.2):
+                partial = answers_file.with_suffix(".partial")  # replaced whole: a reader never sees half
+                partial.write_text(f"{answers}\n")
+                os.replace(partial, answers_file)
+                noted_at = sent_at
+            # at the frame rate, without a burst to catch up after a stall (a loaded machine, a long wait)
+            next_at = max(next_at + frame_wall_s, time.monotonic() - frame_wall_s)
+            time.sleep(max(0.0, next_at - time.monotonic()))
 
 
 class SitlFace(MavlinkFace):
@@ -60,6 +111,7 @@ def main() -> None:
     parser.add_argument("-I", dest="instance", type=int, default=0)
     parser.add_argument("--home")
     parser.add_argument("--serial0")
+    parser.add_argument("--sim-port-out", type=int, default=None)
     args = parser.parse_args()
     log_dir = os.environ.get("FAKE_SITL_LOG_DIR")
     if log_dir:
@@ -91,6 +143,11 @@ def main() -> None:
                 airborne.write_text(f"{simulator.time_s:.2f}\n")
 
         simulator.step = step_and_note
+    if args.model and args.model.startswith("JSON"):
+        host = args.model.partition(":")[2] or "127.0.0.1"
+        port = args.sim_port_out if args.sim_port_out is not None else DEFAULT_PORT + 10 * args.instance
+        threading.Thread(target=serve_json_physics, daemon=True,
+                         kwargs={"host": host, "port": port, "speedup": args.speedup, "log_dir": log_dir}).start()
     face = SitlFace(simulator=simulator, clock=ScaledWallClock(speedup=args.speedup), listen=args.serial0,
                     sim_values=given)
     asyncio.run(face.run())

@@ -1,0 +1,275 @@
+"""ArduCopter SITL flown on preland's motor-level quad X (JSON physics) beside ArduPilot's own `--model quad`.
+
+For each physics: start `arducopter` in a temporary folder (`-w`, copter.parm as defaults), wait for a
+position estimate, GUIDED, arm, take off to 5 m, hold 10 s, LAND; print whether it armed, took off and
+landed, the hover throttle (MOT_THST_HOVER as learned, and the mean motor output (PWM - 1000) / 1000
+in the hold), the largest altitude error in the hold and vehicle seconds per wall second. The JSON
+physics is served by `JsonBridge` from a thread of this process. Every process started is stopped on
+every path.
+
+Usage: python benchmarks/json_bridge_hover.py [--binary PATH] [--speedup N]
+       (binary: $PRELAND_SITL_BINARY; copter.parm from the binary's ArduPilot tree, else preland's copy)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pymavlink import mavutil  # noqa: E402
+
+from preland_app.runtime.sitl import PACKAGED_DEFAULTS, find_copter_defaults  # noqa: E402
+from preland_app.sim.json_bridge import JsonBridge  # noqa: E402
+from preland_app.sim.multirotor import QuadXFrame, QuadXMultirotor  # noqa: E402
+
+HOME = "-35.363261,149.165230,584,353"  # ArduPilot's CMAC test site, SITL's usual home
+MAVLINK_PORT = 14571
+TAKEOFF_ALT_M = 5.0
+HOLD_S = 10.0
+# Parameters the JSON frame adds to copter.parm. copter.parm sets FRAME_TYPE 0 (plus), the frame of
+# `--model quad` (SIM_Frame.cpp: "quad" is quad_plus_motors); the JSON model is quad X (FRAME_TYPE 1,
+# AP_Motors::MOTOR_FRAME_TYPE_X). Mixed as plus, the X airframe's roll and pitch couple at 45 degrees
+# and ArduCopter holds it only in a saturated 15 Hz whirl.
+JSON_EXTRA_PARAMS: dict[str, float] = {"FRAME_TYPE": 1}
+
+
+@dataclass
+class FlightReport:
+    physics: str
+    armed: bool = False
+    took_off: bool = False
+    landed: bool = False
+    hover_learned: float | None = None
+    hover_motor_output: float | None = None
+    hover_model_command: float | None = None
+    motor_spread: float | None = None
+    max_alt_error_m: float | None = None
+    vehicle_s_per_wall_s: float | None = None
+    failure: str = ""
+    statustexts: list[str] = field(default_factory=list)
+
+
+class Link:
+    """A MAVLink connection that keeps the latest message of each type and every STATUSTEXT."""
+
+    def __init__(self, port: int, report: FlightReport) -> None:
+        self.mav = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=250)
+        self.report = report
+        self.latest: dict[str, object] = {}
+
+    def pump(self, wall_timeout_s: float, until=None) -> bool:
+        """Read messages until `until(self)` holds (True) or `wall_timeout_s` passes (False)."""
+        deadline = time.monotonic() + wall_timeout_s
+        while time.monotonic() < deadline:
+            msg = self.mav.recv_match(blocking=True, timeout=0.2)
+            if msg is not None:
+                kind = msg.get_type()
+                self.latest[kind] = msg
+                if kind == "STATUSTEXT":
+                    self.report.statustexts.append(msg.text)
+            if until is not None and until(self):
+                return True
+        return until is None
+
+    def boot_s(self) -> float:
+        msg = self.latest.get("GLOBAL_POSITION_INT")
+        return msg.time_boot_ms / 1000.0 if msg is not None else 0.0
+
+    def rel_alt_m(self) -> float:
+        msg = self.latest.get("GLOBAL_POSITION_INT")
+        return msg.relative_alt / 1000.0 if msg is not None else 0.0
+
+    def armed(self) -> bool:
+        hb = self.latest.get("HEARTBEAT")
+        return hb is not None and bool(hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    def param(self, name: str, wall_timeout_s: float = 10.0) -> float | None:
+        self.latest.pop("PARAM_VALUE", None)
+        self.mav.mav.param_request_read_send(self.mav.target_system, self.mav.target_component, name.encode(), -1)
+        ok = self.pump(wall_timeout_s, lambda s: "PARAM_VALUE" in s.latest and s.latest["PARAM_VALUE"].param_id == name)
+        return float(self.latest["PARAM_VALUE"].param_value) if ok else None
+
+
+def copter_parm(binary: str) -> Path:
+    """ArduPilot's copter.parm of the binary's tree, else the copy preland packages (as the SITL runtime)."""
+    return find_copter_defaults(Path(binary)) or PACKAGED_DEFAULTS
+
+
+def write_defaults(folder: Path, extra: dict[str, float], *, binary: str) -> Path:
+    path = folder / "defaults.parm"
+    text = copter_parm(binary).read_text() + "".join(f"\n{k} {v}" for k, v in extra.items()) + "\n"
+    path.write_text(text)
+    return path
+
+
+def fly(link: Link, report: FlightReport, speedup: float, bridge: JsonBridge | None) -> None:
+    mav = link.mav
+    if mav.wait_heartbeat(timeout=60) is None:
+        report.failure = "no heartbeat"
+        return
+    mav.mav.request_data_stream_send(mav.target_system, mav.target_component,
+                                     mavutil.mavlink.MAV_DATA_STREAM_ALL, 10, 1)
+    wall = lambda vehicle_s: vehicle_s / speedup + 30.0  # noqa: E731  a bounded wall wait for a vehicle time
+
+    def has_position(s: Link) -> bool:
+        ekf = s.latest.get("EKF_STATUS_REPORT")
+        gps = s.latest.get("GPS_RAW_INT")
+        wanted = mavutil.mavlink.EKF_POS_HORIZ_ABS | mavutil.mavlink.EKF_PRED_POS_HORIZ_ABS
+        return ekf is not None and gps is not None and gps.fix_type >= 3 and (ekf.flags & wanted) == wanted
+    if not link.pump(wall(120), has_position):
+        report.failure = "no position estimate"
+        return
+    started_wall, started_vehicle = time.monotonic(), link.boot_s()
+
+    mav.set_mode("GUIDED")
+    deadline = time.monotonic() + wall(90)
+    while not link.armed() and time.monotonic() < deadline:
+        mav.arducopter_arm()
+        link.pump(3.0, Link.armed)
+    report.armed = link.armed()
+    if not report.armed:
+        report.failure = "did not arm"
+        return
+    mav.mav.command_long_send(mav.target_system, mav.target_component, mavutil.mavlink.MAV_CMD_NAV_TAKEOFF,
+                              0, 0, 0, 0, 0, 0, 0, TAKEOFF_ALT_M)
+    report.took_off = link.pump(wall(40), lambda s: s.rel_alt_m() >= TAKEOFF_ALT_M - 0.25)
+    if not report.took_off:
+        report.failure = f"did not reach {TAKEOFF_ALT_M - 0.25} m (at {link.rel_alt_m():.2f} m)"
+        return
+    settle_until = link.boot_s() + 3.0  # let the climb settle for 3 vehicle s
+    link.pump(wall(3), lambda s: s.boot_s() >= settle_until)
+    hold_start = link.boot_s()
+    errors, outputs, commands, spreads = [], [], [], []
+    deadline = time.monotonic() + wall(HOLD_S)
+    while link.boot_s() - hold_start < HOLD_S and time.monotonic() < deadline:
+        msg = mav.recv_match(blocking=True, timeout=0.2)
+        if msg is None:
+            continue
+        link.latest[msg.get_type()] = msg
+        if msg.get_type() == "GLOBAL_POSITION_INT":
+            errors.append(abs(msg.relative_alt / 1000.0 - TAKEOFF_ALT_M))
+            if bridge is not None:
+                commands.append(sum(bridge.latest_state.motor_commands) / 4)
+        elif msg.get_type() == "SERVO_OUTPUT_RAW":
+            pwm = (msg.servo1_raw, msg.servo2_raw, msg.servo3_raw, msg.servo4_raw)
+            outputs.append(sum((p - 1000) / 1000.0 for p in pwm) / 4)
+            spreads.append((max(pwm) - min(pwm)) / 1000.0)
+        elif msg.get_type() == "STATUSTEXT":
+            report.statustexts.append(msg.text)
+    report.max_alt_error_m = max(errors) if errors else None
+    report.hover_motor_output = sum(outputs) / len(outputs) if outputs else None
+    report.motor_spread = sum(spreads) / len(spreads) if spreads else None
+    report.hover_model_command = sum(commands) / len(commands) if commands else None
+    report.hover_learned = link.param("MOT_THST_HOVER")
+    mav.set_mode("LAND")
+    report.landed = link.pump(wall(60), lambda s: not s.armed() and s.rel_alt_m() < 0.5)
+    if not report.landed:
+        report.failure = f"did not land and disarm (at {link.rel_alt_m():.2f} m, armed {link.armed()})"
+    wall_s = time.monotonic() - started_wall
+    report.vehicle_s_per_wall_s = (link.boot_s() - started_vehicle) / wall_s if wall_s > 0 else None
+
+
+def run_one(binary: str, physics: str, speedup: float) -> FlightReport:
+    report = FlightReport(physics=physics)
+    bridge: JsonBridge | None = None
+    process: subprocess.Popen | None = None
+    with tempfile.TemporaryDirectory(prefix=f"preland-{physics}-") as tmp:
+        folder = Path(tmp)
+        try:
+            if physics == "json":
+                bridge = JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), packet_timeout_s=60.0).start()
+                model = ["--model", "JSON:127.0.0.1"]
+                defaults = write_defaults(folder, JSON_EXTRA_PARAMS, binary=binary)
+            else:
+                model = ["--model", "quad"]
+                defaults = write_defaults(folder, {}, binary=binary)
+            command = [binary, *model, "-w", "--defaults", str(defaults), "--speedup", str(speedup), "-I", "0",
+                       "--home", HOME, "--serial0", f"udpclient:127.0.0.1:{MAVLINK_PORT}"]
+            log = open(folder / "sitl.log", "wb")
+            process = subprocess.Popen(command, cwd=folder, stdout=log, stderr=subprocess.STDOUT,
+                                       stdin=subprocess.DEVNULL, start_new_session=True)
+            link = Link(MAVLINK_PORT, report)
+            try:
+                fly(link, report, speedup, bridge)
+            finally:
+                link.mav.close()
+            if bridge is not None and bridge.error is not None:
+                report.failure += f" bridge: {bridge.error}"
+        except Exception as error:  # reported, not raised: the other physics still flies
+            report.failure += f" {type(error).__name__}: {error}"
+        finally:
+            if process is not None:
+                stop_process_group(process)
+            if bridge is not None:
+                bridge.stop()
+            if report.failure and (folder / "sitl.log").exists():
+                tail = (folder / "sitl.log").read_text(errors="replace").splitlines()[-15:]
+                report.statustexts.extend(f"[sitl stdout] {line}" for line in tail)
+    return report
+
+
+def stop_process_group(process: subprocess.Popen) -> None:
+    """SIGTERM the process group, SIGKILL it after 5 s, and check nothing of it is left."""
+    for sig, wait_s in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(process.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            process.wait(wait_s)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+    left = subprocess.run(["pgrep", "-g", str(process.pid)], capture_output=True, text=True).stdout.split()
+    if left:
+        raise RuntimeError(f"processes left in group {process.pid}: {left}")
+
+
+def fmt(value: float | None, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--binary", default=os.environ.get("PRELAND_SITL_BINARY"))
+    parser.add_argument("--speedup", type=float, default=5.0)
+    parser.add_argument("--only", choices=("json", "quad"), default=None)
+    args = parser.parse_args()
+    if not args.binary:
+        parser.error("give --binary or set PRELAND_SITL_BINARY to an arducopter SITL binary")
+    physics = [args.only] if args.only else ["json", "quad"]
+    reports = [run_one(args.binary, p, args.speedup) for p in physics]
+    own = subprocess.run(["pgrep", "-P", str(os.getpid())], capture_output=True, text=True).stdout.split()
+    rows = [("physics", lambda r: "JSON (preland quad X)" if r.physics == "json" else "built-in --model quad (+)"),
+            ("armed", lambda r: str(r.armed)), ("took off to 5 m", lambda r: str(r.took_off)),
+            ("landed", lambda r: str(r.landed)),
+            ("MOT_THST_HOVER learned", lambda r: fmt(r.hover_learned, ".4f")),
+            ("mean motor output in hold", lambda r: fmt(r.hover_motor_output, ".3f")),
+            ("motor output spread in hold", lambda r: fmt(r.motor_spread, ".3f")),
+            ("model motor command in hold", lambda r: fmt(r.hover_model_command, ".3f")),
+            ("max altitude error in hold (m)", lambda r: fmt(r.max_alt_error_m, ".3f")),
+            ("vehicle s per wall s", lambda r: fmt(r.vehicle_s_per_wall_s, ".2f")),
+            ("failure", lambda r: r.failure.strip() or "-")]
+    print(f"binary {args.binary}, --speedup {args.speedup:g}")
+    for label, value in rows:
+        print(f"{label:32s}" + "".join(f"{value(r):>28s}" for r in reports))
+    for r in reports:
+        if r.failure:
+            print(f"STATUSTEXT ({r.physics}):")
+            for text in r.statustexts:
+                print("  " + text)
+    print(f"child processes left: {len(own)}")
+
+
+if __name__ == "__main__":
+    main()

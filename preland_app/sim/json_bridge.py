@@ -1,0 +1,184 @@
+"""The lock-step bridge between ArduPilot SITL's JSON interface and a `QuadXMultirotor`.
+
+SITL sends a servo packet and waits for the state; the bridge answers each new packet with the state
+after stepping the model by the packet's 1/frame_rate s. The model's time is the only clock of the
+physics: wall time is used only to bound how long the bridge waits for a packet.
+
+- a repeated frame_count (SITL resends after 1 s without a usable reply) is answered with the same
+  reply again, without stepping;
+- a higher frame_count than the next one (packets lost) is stepped once, as any new packet;
+- a lower frame_count means SITL restarted: the model is reset and its time starts again from 0.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from dataclasses import dataclass
+
+from ..errors import PrelandError
+from .multirotor import MultirotorState, QuadXMultirotor
+from .sitl_json import DEFAULT_PORT, SitlJsonError, build_reply, parse_servo_packet
+
+_POLL_S = 0.05  # how often a waiting bridge looks at its stop flag (wall s)
+_MAX_PACKET_BYTES = 2048
+
+
+class JsonBridgeTimeout(PrelandError):
+    """No servo packet arrived within the bridge's bounded wait."""
+
+    def __init__(self, *, timeout_s: float, packets: int) -> None:
+        self.timeout_s = timeout_s
+        self.packets = packets
+        super().__init__(f"JSON bridge: no servo packet for {timeout_s:g} wall s (after {packets} packets)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class BridgeCounters:
+    """What the bridge has done: packets received, steps taken, repeats answered, resets, bad packets."""
+
+    packets: int
+    steps: int
+    repeats: int
+    resets: int
+    frames_skipped: int
+    bad_packets: int
+    last_frame_count: int | None
+
+
+class JsonBridge:
+    """A UDP server answering SITL's servo packets with `model`'s state, in lock-step.
+
+    Use `start()` / `stop()` (or `with JsonBridge(...)`) to serve from a thread, or `serve()` to serve in
+    the calling thread until `stop()` or a timeout. `packet_timeout_s` bounds the wait for each packet
+    (wall s); when it passes, `serve` raises JsonBridgeTimeout (kept in `error` when serving in a thread).
+    """
+
+    def __init__(self, *, model: QuadXMultirotor, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
+                 packet_timeout_s: float = 30.0, send_rangefinder: bool = True,
+                 battery_voltage_v: float | None = None) -> None:
+        if packet_timeout_s <= 0:
+            raise ValueError("packet_timeout_s must be positive")
+        self.model = model
+        self.packet_timeout_s = float(packet_timeout_s)
+        self._send_rangefinder = send_rangefinder
+        self._battery_voltage_v = battery_voltage_v
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self._sock.bind((host, port))
+        self._sock.settimeout(_POLL_S)
+        self.address = self._sock.getsockname()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+        self._last_frame: int | None = None
+        self._last_reply: bytes = b""
+        self._packets = self._steps = self._repeats = self._resets = self._skipped = self._bad = 0
+        self._latest: MultirotorState = model.state
+        self.error: BaseException | None = None
+
+    # --- life cycle -----------------------------------------------------------------------------
+
+    def start(self) -> "JsonBridge":
+        """Serve from a daemon thread; returns self."""
+        if self._thread is not None:
+            raise RuntimeError("bridge already started")
+        self._thread = threading.Thread(target=self._serve_in_thread, name="sitl-json-bridge", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, *, timeout_s: float = 5.0) -> None:
+        """Stop serving, wait (bounded) for the thread, close the socket. Safe to call twice."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        self._sock.close()
+
+    def wait(self, timeout_s: float) -> bool:
+        """Wait at most `timeout_s` wall s for the serving thread to end; True if it has ended."""
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        return not self.running
+
+    def __enter__(self) -> "JsonBridge":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        """True while the serving thread is alive."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def _serve_in_thread(self) -> None:
+        try:
+            self.serve()
+        except BaseException as error:  # kept for the owner, who reads `error`
+            self.error = error
+
+    # --- serving --------------------------------------------------------------------------------
+
+    def serve(self, *, max_packets: int | None = None) -> None:
+        """Answer packets until `stop()`, `max_packets` packets, or JsonBridgeTimeout."""
+        served = 0
+        deadline = time.monotonic() + self.packet_timeout_s  # wall time bounds the wait only
+        while not self._stop.is_set() and (max_packets is None or served < max_packets):
+            try:
+                data, sender = self._sock.recvfrom(_MAX_PACKET_BYTES)
+            except socket.timeout:
+                if time.monotonic() > deadline:
+                    raise JsonBridgeTimeout(timeout_s=self.packet_timeout_s, packets=self._packets) from None
+                continue
+            except OSError:
+                if self._stop.is_set():
+                    return  # socket closed by stop()
+                raise
+            deadline = time.monotonic() + self.packet_timeout_s
+            reply = self.handle(data)
+            if reply is not None:
+                self._sock.sendto(reply, sender)
+            served += 1
+
+    def handle(self, data: bytes) -> bytes | None:
+        """The reply to one datagram (None for one that is not a servo packet); steps the model."""
+        try:
+            packet = parse_servo_packet(data)
+        except SitlJsonError:
+            with self._lock:
+                self._bad += 1
+            return None
+        with self._lock:
+            self._packets += 1
+            last = self._last_frame
+            if last is not None and packet.frame_count == last:
+                self._repeats += 1
+                return self._last_reply
+            if last is not None and packet.frame_count < last:
+                self.model.reset()  # SITL restarted: so does the physics
+                self._resets += 1
+            elif last is not None and packet.frame_count > last + 1:
+                self._skipped += packet.frame_count - last - 1
+            state = self.model.step(packet.pwm_us, packet.dt_s)
+            self._steps += 1
+            self._last_frame = packet.frame_count
+            self._last_reply = build_reply(state, include_rangefinder=self._send_rangefinder,
+                                           battery_voltage_v=self._battery_voltage_v).encode()
+            self._latest = state
+            return self._last_reply
+
+    # --- readings for other threads ---------------------------------------------------------------
+
+    @property
+    def latest_state(self) -> MultirotorState:
+        """The state of the last reply (a frozen snapshot)."""
+        return self._latest
+
+    @property
+    def counters(self) -> BridgeCounters:
+        """A consistent snapshot of the bridge's counters."""
+        with self._lock:
+            return BridgeCounters(packets=self._packets, steps=self._steps, repeats=self._repeats,
+                                  resets=self._resets, frames_skipped=self._skipped, bad_packets=self._bad,
+                                  last_frame_count=self._last_frame)

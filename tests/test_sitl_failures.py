@@ -1,0 +1,88 @@
+"""The SITL runtime's failures, on the stand-in `arducopter` (tests/tools/fake_sitl.py), with either
+physics: an interrupted campaign, a SITL killed or stopped mid-trial; no process or bridge is left."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from preland_app.outcome import Outcome
+from preland_app.runtime.embedded import TrialRequest
+from preland_app.runtime.sitl import SitlOptions, run_sitl_trial
+
+from .conftest import ROOT, THESIS_MISSION
+from .test_sitl import (_alive, _answers, _bridge_threads, _launches, _run_in_thread, _wait_airborne,
+                        _wait_dead, _wait_for_launch, fake_sitl)
+from .tools.terminal import as_from_a_terminal
+
+__all__ = ["fake_sitl"]  # the fixture, shared with test_sitl.py
+
+
+@pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
+def test_an_interrupted_sitl_campaign_leaves_no_sitl_process(fake_sitl, tmp_path):
+    script, logs = fake_sitl
+    campaign = tmp_path / "c.yaml"
+    campaign.write_text(f"name: sitl_orphans\nmission: {THESIS_MISSION}\ntrials: 4\n"
+                        "scenarios: [{label: gps, land: normal}]\n")
+    process = subprocess.Popen(
+        [sys.executable, "-m", "preland_app.cli", "campaign", "run", str(campaign), "--db", str(tmp_path / "r.db"),
+         "--workers", "2", "--quiet", "--sitl", str(script), "--sitl-speedup", "2"],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env={**os.environ},
+        preexec_fn=as_from_a_terminal)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(_launches(logs)) < 2:
+        time.sleep(0.1)
+    launches = _launches(logs)
+    assert len(launches) >= 2, "two SITL processes should be running"
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 130, stderr
+    for launch in _launches(logs):
+        _wait_dead(launch["pid"])
+
+
+@pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
+@pytest.mark.parametrize("physics", ["ardupilot", "preland"])
+def test_sitl_killed_mid_trial_ends_the_trial_as_error_naming_the_exit(fake_sitl, thesis_mission, physics):
+    script, logs = fake_sitl
+    pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
+                                                         options=SitlOptions(binary=script, speedup=3.0,
+                                                                             physics=physics)))
+    launch = _wait_for_launch(logs)
+    _wait_airborne(logs, launch)  # stopped in flight
+    os.kill(launch["pid"], signal.SIGKILL)
+    outcome = future.result(timeout=60)
+    pool.shutdown()
+    assert outcome.outcome is Outcome.ERROR
+    assert "killed by SIGKILL" in outcome.message and "SitlExited" in outcome.message
+    assert any(e.kind == "armed" for e in outcome.events)  # what it recorded before is kept
+    assert not _alive(launch["pid"])
+    assert _bridge_threads() == []  # the bridge stopped with its trial
+    if physics == "preland":
+        assert _answers(logs, launch) > 0
+
+
+@pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
+@pytest.mark.parametrize("physics", ["ardupilot", "preland"])
+def test_sitl_that_stops_answering_ends_as_link_lost_in_bounded_time(fake_sitl, thesis_mission, physics):
+    """A stopped SITL sends no servo packets either: the bridge, still waiting for one, does not hold the
+    trial, which the lost link ends; the bridge then stops with it."""
+    script, logs = fake_sitl
+    pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
+                                                         options=SitlOptions(binary=script, speedup=3.0,
+                                                                             physics=physics)))
+    launch = _wait_for_launch(logs)
+    _wait_airborne(logs, launch)  # stopped in flight
+    os.kill(launch["pid"], signal.SIGSTOP)
+    stopped_at = time.monotonic()
+    outcome = future.result(timeout=60)
+    elapsed_s = time.monotonic() - stopped_at
+    pool.shutdown()
+    assert outcome.outcome is Outcome.LINK_LOST, outcome.message
+    assert elapsed_s < 20.0
+    _wait_dead(launch["pid"])
+    assert _bridge_threads() == []

@@ -1,0 +1,203 @@
+"""ArduPilot SITL's JSON interface: wire format, the quad X motor model, the lock-step bridge (no SITL binary)."""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+import struct
+
+import pytest
+
+from preland_app.errors import PrelandError
+from preland_app.sim.json_bridge import JsonBridge, JsonBridgeTimeout
+from preland_app.sim.multirotor import GRAVITY_M_S2, QuadXFrame, QuadXMultirotor
+from preland_app.sim.sitl_json import (MAGIC_16, MAGIC_32, REQUIRED_KEYS, SitlJsonError, build_reply,
+                                       build_servo_packet, parse_reply_like_sim_json, parse_servo_packet)
+
+RATE_HZ = 1200  # SITL.cpp SIM_RATE_HZ_DEFAULT on SITL boards
+DT_S = 1.0 / RATE_HZ
+
+
+def airborne(frame: QuadXFrame | None = None, altitude_m: float = 5.0) -> QuadXMultirotor:
+    """A vehicle at `altitude_m` with its motors already at the hover command."""
+    frame = frame or QuadXFrame()
+    hover = frame.pwm_to_command(frame.hover_pwm_us())
+    return QuadXMultirotor(frame=frame, position_ned_m=(0.0, 0.0, -altitude_m), motor_commands=[hover] * 4)
+
+
+# --- wire format ------------------------------------------------------------------------------------
+
+
+def test_servo_packets_of_both_magics_parse():
+    raw16 = struct.pack("<HHI16H", MAGIC_16, 1200, 77, *range(1000, 1016))
+    packet = parse_servo_packet(raw16)
+    assert (packet.magic, packet.frame_rate_hz, packet.frame_count) == (MAGIC_16, 1200, 77)
+    assert packet.pwm_us == tuple(range(1000, 1016)) and packet.dt_s == pytest.approx(1 / 1200)
+    raw32 = struct.pack("<HHI32H", MAGIC_32, 400, 2**32 - 1, *range(1100, 1132))
+    packet = parse_servo_packet(raw32)
+    assert (packet.magic, packet.frame_rate_hz, packet.frame_count) == (MAGIC_32, 400, 2**32 - 1)
+    assert len(packet.pwm_us) == 32 and packet.pwm_us[31] == 1131
+    assert len(raw16) == 40 and len(raw32) == 72  # SIM_JSON.h's structs, no padding
+    assert build_servo_packet(frame_rate_hz=1200, frame_count=77, pwm_us=range(1000, 1016)) == raw16
+
+
+@pytest.mark.parametrize("raw", [b"", struct.pack("<HHI16H", 1234, 1200, 0, *[1000] * 16),
+                                 struct.pack("<HHI16H", MAGIC_32, 1200, 0, *[1000] * 16),
+                                 struct.pack("<HHI16H", MAGIC_16, 0, 0, *[1000] * 16)])
+def test_what_is_not_a_servo_packet_is_refused(raw):
+    with pytest.raises(SitlJsonError):
+        parse_servo_packet(raw)
+    assert issubclass(SitlJsonError, PrelandError)
+
+
+def test_the_reply_is_one_json_line_that_sim_json_reads():
+    state = airborne().step([1500] * 4, DT_S)
+    text = build_reply(state, include_euler=True, battery_voltage_v=12.6)
+    assert text.startswith("\n") and text.endswith("\n") and text.count("\n") == 2
+    assert ": " not in text and ", " not in text  # SIM_JSON skips len(key)+2 and sscanf's "[%f, %f, %f]"
+    data = json.loads(text)
+    assert {k for s, k in REQUIRED_KEYS if s == ""} <= data.keys() and {"gyro", "accel_body"} <= data["imu"].keys()
+    assert len(data["quaternion"]) == 4 and len(data["attitude"]) == 3 and data["battery"]["voltage"] == 12.6
+    assert data["timestamp"] == pytest.approx(DT_S) and data["rng_1"] == pytest.approx(5.0, abs=1e-3)
+    seen = parse_reply_like_sim_json(text)
+    assert seen["position"] == pytest.approx(list(state.position_ned_m))
+    assert seen["quaternion"] == pytest.approx(list(state.quaternion_wxyz))
+    assert seen["accel_body"] == pytest.approx(list(state.accel_frd_m_s2))
+    with pytest.raises(SitlJsonError):  # a space after the colon: SIM_JSON's sscanf reads nothing
+        parse_reply_like_sim_json(text.replace('"position":', '"position": '))
+    with pytest.raises(SitlJsonError):  # a required key missing
+        parse_reply_like_sim_json(text.replace('"velocity"', '"speed"'))
+
+
+# --- the motor model --------------------------------------------------------------------------------
+
+
+def test_thrust_curve_matches_arducopter_hover():
+    frame = QuadXFrame()
+    # four motors at MOT_THST_HOVER's thrust lift the weight: thrust fraction 0.39 of maximum
+    assert 4 * frame.max_thrust_per_motor_n * frame.thrust_fraction(
+        frame.command_for_thrust_fraction(0.39)) == pytest.approx(frame.mass_kg * GRAVITY_M_S2)
+    assert frame.hover_pwm_us() == pytest.approx(1590.66, abs=0.01)  # 1000 + (0.15 + 0.5508 * 0.8) * 1000
+    assert frame.pwm_to_command(1150) == 0.0 and frame.pwm_to_command(1950) == 1.0
+    assert frame.command_to_pwm_us(frame.pwm_to_command(1400)) == pytest.approx(1400)
+
+
+def test_at_rest_on_the_ground_with_motors_at_pwm_min_it_stays_at_rest():
+    model = QuadXMultirotor()
+    for _ in range(10 * RATE_HZ):  # 10 simulated s
+        state = model.step([1000] * 4, DT_S)
+    assert state.time_s == pytest.approx(10.0)
+    assert state.position_ned_m == (0.0, 0.0, 0.0) and state.velocity_ned_m_s == (0.0, 0.0, 0.0)
+    assert state.on_ground and state.accel_frd_m_s2 == pytest.approx((0.0, 0.0, -GRAVITY_M_S2))
+    assert state.gyro_frd_rad_s == (0.0, 0.0, 0.0) and state.rangefinder_down_m == 0.0
+
+
+def test_at_the_hover_pwm_it_holds_altitude():
+    frame = QuadXFrame()
+    model = airborne(frame)
+    hover_pwm = frame.hover_pwm_us()
+    for _ in range(5 * RATE_HZ):
+        state = model.step([hover_pwm] * 4, DT_S)
+    assert abs(state.position_ned_m[2] + 5.0) < 0.03  # within 3 cm over 5 s
+    assert max(abs(v) for v in state.velocity_ned_m_s) < 0.01
+    assert state.accel_frd_m_s2[2] == pytest.approx(-GRAVITY_M_S2, abs=1e-3)
+
+
+def test_it_takes_off_and_touches_down_without_bouncing():
+    frame = QuadXFrame()
+    model = QuadXMultirotor(frame=frame)
+    for _ in range(RATE_HZ):  # 1 s at 60 us above hover
+        state = model.step([frame.hover_pwm_us() + 60] * 4, DT_S)
+    assert not state.on_ground and state.position_ned_m[2] < -0.1
+    heights = []
+    for _ in range(5 * RATE_HZ):  # motors to idle: it falls, touches down, stays
+        state = model.step([1000] * 4, DT_S)
+        heights.append(-state.position_ned_m[2])
+    touchdown = next(i for i, h in enumerate(heights) if h <= 0.0)
+    assert all(h == 0.0 for h in heights[touchdown:])  # no bounce, no sinking
+    assert state.on_ground and state.velocity_ned_m_s == (0.0, 0.0, 0.0)
+
+
+def test_more_thrust_on_motors_1_and_4_rolls_left_as_arducopter_mixes():
+    # AP_MotorsMatrix: roll factor cos(angle + 90 deg) is negative for motors 1 (45 deg) and 4 (135 deg),
+    # so ArduCopter lowers them to roll right: raised, they roll the vehicle left (negative roll).
+    assert math.cos(math.radians(45 + 90)) < 0 and math.cos(math.radians(135 + 90)) < 0
+    frame = QuadXFrame()
+    model = airborne(frame)
+    hover = frame.hover_pwm_us()
+    for _ in range(RATE_HZ // 10):
+        state = model.step([hover + 50, hover, hover, hover + 50], DT_S)
+    roll, pitch, yaw = state.euler_rad
+    assert roll < -0.05 and state.gyro_frd_rad_s[0] < -1.0
+    assert abs(pitch) < 1e-9 and abs(yaw) < 1e-9
+    model = airborne(frame)
+    for _ in range(RATE_HZ // 10):  # front motors 1 and 3 raised: nose up (positive pitch)
+        state = model.step([hover + 50, hover, hover + 50, hover], DT_S)
+    assert state.euler_rad[1] > 0.05 and abs(state.euler_rad[0]) < 1e-9
+
+
+def test_more_thrust_on_the_ccw_motors_yaws_right():
+    # AP_MotorsMatrix.h: yaw factor CCW = +1 (motors 1, 2): ArduCopter raises them to yaw right (positive)
+    frame = QuadXFrame()
+    model = airborne(frame)
+    hover = frame.hover_pwm_us()
+    for _ in range(RATE_HZ // 2):
+        state = model.step([hover + 50, hover + 50, hover - 50, hover - 50], DT_S)
+    assert state.gyro_frd_rad_s[2] > 0.1 and state.euler_rad[2] > 0.01
+    assert abs(state.euler_rad[0]) < 1e-9 and abs(state.euler_rad[1]) < 1e-9
+
+
+# --- the lock-step bridge ---------------------------------------------------------------------------
+
+
+class StandInSitl:
+    """A UDP client that talks to the bridge as SIM_JSON does: a servo packet, then wait for the reply."""
+
+    def __init__(self, address: tuple[str, int]) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.settimeout(5.0)  # every wait bounded
+        self.address = address
+
+    def exchange(self, frame_count: int, pwm_us: list[int]) -> dict:
+        self.sock.sendto(build_servo_packet(frame_rate_hz=RATE_HZ, frame_count=frame_count, pwm_us=pwm_us),
+                         self.address)
+        text = self.sock.recvfrom(65000)[0].decode()
+        parse_reply_like_sim_json(text)
+        return json.loads(text)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def test_the_bridge_answers_1000_steps_in_lock_step():
+    bridge = JsonBridge(model=QuadXMultirotor(), port=0, packet_timeout_s=10.0).start()
+    sitl = StandInSitl(bridge.address)
+    try:
+        pwm = [1000] * 16
+        replies = [sitl.exchange(frame, pwm) for frame in range(1000)]
+        for i, reply in enumerate(replies):
+            assert reply["timestamp"] == pytest.approx((i + 1) * DT_S, abs=1e-9)
+        steps = [b["timestamp"] - a["timestamp"] for a, b in zip(replies, replies[1:])]
+        assert min(steps) == pytest.approx(DT_S, abs=1e-12) and max(steps) == pytest.approx(DT_S, abs=1e-12)
+        again = sitl.exchange(999, pwm)  # SITL resending a frame: the same answer, no step
+        assert again == replies[-1]
+        counters = bridge.counters
+        assert (counters.packets, counters.steps, counters.repeats, counters.last_frame_count) == (1001, 1000, 1, 999)
+        restarted = sitl.exchange(0, pwm)  # a lower frame count: SITL restarted, the physics too
+        assert restarted["timestamp"] == pytest.approx(DT_S) and bridge.counters.resets == 1
+        assert bridge.error is None and bridge.running
+    finally:
+        sitl.close()
+        bridge.stop()
+    assert not bridge.running
+
+
+def test_the_bridge_gives_up_after_its_bounded_wait():
+    bridge = JsonBridge(model=QuadXMultirotor(), port=0, packet_timeout_s=0.3).start()
+    try:
+        assert bridge.wait(5.0)  # bounded: the bridge's own 0.3 s wait ends its thread
+        assert isinstance(bridge.error, JsonBridgeTimeout) and isinstance(bridge.error, PrelandError)
+        assert bridge.error.packets == 0
+    finally:
+        bridge.stop()
