@@ -19,6 +19,7 @@ from preland_app.campaign.spec import load_campaign
 from preland_app.campaign.store import DuplicateTrial, ResultsStore, TrialRecord
 from preland_app.cli import app
 
+from .waiting import until
 from .conftest import ROOT
 
 MISSION = ROOT / "missions" / "thesis_square_land.yaml"
@@ -164,10 +165,7 @@ def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
                 and "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()]
 
     # The workers notice their parent has gone and exit: bounded, not a fixed sleep.
-    deadline = time.monotonic() + 30
-    while orphans() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not orphans(), "orphan workers"
+    until(lambda: not orphans(), timeout_s=30, what="the orphaned workers to exit")
 
     result = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(db), "--resume", "--quiet",
                                       "--workers", "2"])

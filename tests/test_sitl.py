@@ -20,6 +20,7 @@ from preland_app.runtime.sitl import SITL_ENV, SitlOptions, run_sitl_trial
 
 from .conftest import ROOT, THESIS_MISSION
 from .tools.terminal import as_from_a_terminal
+from .waiting import until
 
 
 # The stand-in SITL's speed-up where a test is not about speed: 8x, what its 20x and 40x reached before the
@@ -133,11 +134,9 @@ def _wait_for_launch(logs: Path, timeout_s: float = 30.0) -> dict:
 
 def _wait_airborne(logs: Path, launch: dict, timeout_s: float = 120.0) -> None:
     """Until the stand-in's vehicle is in the air (its PID.airborne file), however loaded the machine is."""
-    deadline = time.monotonic() + timeout_s
-    while not (logs / f"{launch['pid']}.airborne").exists():
-        if time.monotonic() > deadline or not _alive(launch["pid"]):
-            raise AssertionError(f"the stand-in's vehicle was not airborne within {timeout_s:g} s")
-        time.sleep(0.05)
+    until(lambda: (logs / f"{launch['pid']}.airborne").exists() or not _alive(launch["pid"]), timeout_s=timeout_s,
+          what="the stand-in's vehicle to be airborne")
+    assert _alive(launch["pid"]), "the stand-in ended before its vehicle was airborne"
 
 
 def _bridge_threads() -> list[str]:
@@ -145,11 +144,20 @@ def _bridge_threads() -> list[str]:
 
 
 def _children() -> list[int]:
-    """The pids of this process's living children (a zombie not yet reaped is not one)."""
+    """The pids of this process's living SITL children, stand-in or real (a zombie not yet reaped is not
+    one; children of other tests sharing the worker, such as a served simulator's tools, are not either)."""
     pids = []
     for task in Path("/proc/self/task").iterdir():
         pids += [int(pid) for pid in (task / "children").read_text().split()]
-    return [pid for pid in pids if _alive(pid)]
+    return [pid for pid in pids if _alive(pid) and _is_sitl(pid)]
+
+
+def _is_sitl(pid: int) -> bool:
+    try:
+        command = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return False
+    return "fake_sitl.py" in command or "arducopter" in command
 
 
 def _answers(logs: Path, launch: dict) -> int:
@@ -159,11 +167,7 @@ def _answers(logs: Path, launch: dict) -> int:
 
 
 def _wait_dead(pid: int, timeout_s: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while _alive(pid):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"SITL process {pid} still alive after {timeout_s:g} s")
-        time.sleep(0.05)
+    until(lambda: not _alive(pid), timeout_s=timeout_s, what=f"SITL process {pid} to end")
 
 
 def test_without_copter_defaults_the_stand_in_refuses_to_arm_as_arducopter_does(fake_sitl, thesis_mission, tmp_path):
