@@ -126,22 +126,36 @@ def fly_paced(mission, *, seed: int, **request) -> tuple:
     return outcome, served
 
 
-def test_lost_heartbeat_ends_the_trial_as_link_lost(thesis_mission):
-    served = ServedSimulator(thesis_mission, seed=5, speedup=6.0)  # heartbeats: wall-clock bound
+def _silence_heartbeats_in_flight(mission, *, seed: int, paced: bool, speedup: float = SPEEDUP) -> tuple:
+    """Fly `mission` and silence the face's HEARTBEAT once the vehicle is in the air: (outcome, vehicle time
+    of the silence, vehicle time the trial ended at)."""
+    served = ServedSimulator(mission, seed=seed, speedup=speedup, paced=paced)
 
     async def main():
-        trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=thesis_mission, seed=5), url=served.url))
+        trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=mission, seed=seed), url=served.url,
+                                                  paced=paced))
         await until_async(lambda: served.simulator.autopilot.landed_state().name == "IN_AIR" or trial.done(),
                           timeout_s=PATIENCE_S, what="the vehicle to take off")
-        silenced_at = served.simulator.time_s
-        served.face.heartbeats_enabled = False
-        outcome = await asyncio.wait_for(trial, timeout=30)
+        silenced = asyncio.get_running_loop().create_future()
+
+        def silence():  # on the face's own loop, between two of its steps
+            served.face.heartbeats_enabled = False
+            silenced.get_loop().call_soon_threadsafe(silenced.set_result, served.simulator.time_s)
+
+        served.loop.call_soon_threadsafe(silence)
+        silenced_at = await asyncio.wait_for(silenced, timeout=PATIENCE_S)
+        outcome = await asyncio.wait_for(trial, timeout=PATIENCE_S)
         return outcome, silenced_at, served.simulator.time_s
 
     try:
-        outcome, silenced_at, ended_at = asyncio.run(main())
+        return asyncio.run(main())
     finally:
         served.stop()
+
+
+def test_lost_heartbeat_ends_the_trial_as_link_lost(thesis_mission):
+    # Heartbeats: wall-clock bound.
+    outcome, silenced_at, ended_at = _silence_heartbeats_in_flight(thesis_mission, seed=5, paced=False, speedup=6.0)
     assert outcome.outcome is Outcome.LINK_LOST and "no heartbeat for" in outcome.message
     # The last heartbeat came up to 1 s before the silence; the link counts as lost after 5 vehicle seconds.
     assert ended_at - silenced_at <= 5.0 + 1.0, (silenced_at, ended_at)
@@ -240,28 +254,7 @@ def test_a_paced_flight_against_a_vehicle_that_does_not_pace_is_refused_at_conne
 
 
 def test_in_lock_step_a_lost_heartbeat_is_reckoned_in_vehicle_seconds(thesis_mission):
-    served = ServedSimulator(thesis_mission, seed=5, paced=True)
-
-    async def main():
-        trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=thesis_mission, seed=5), url=served.url,
-                                                  paced=True))
-        await until_async(lambda: served.simulator.autopilot.landed_state().name == "IN_AIR" or trial.done(),
-                          timeout_s=PATIENCE_S, what="the vehicle to take off")
-        silenced = asyncio.get_running_loop().create_future()
-
-        def silence():  # on the face's own loop, between two of its steps
-            served.face.heartbeats_enabled = False
-            silenced.get_loop().call_soon_threadsafe(silenced.set_result, served.simulator.time_s)
-
-        served.loop.call_soon_threadsafe(silence)
-        silenced_at = await asyncio.wait_for(silenced, timeout=PATIENCE_S)
-        outcome = await asyncio.wait_for(trial, timeout=PATIENCE_S)
-        return outcome, silenced_at, served.simulator.time_s
-
-    try:
-        outcome, silenced_at, ended_at = asyncio.run(main())
-    finally:
-        served.stop()
+    outcome, silenced_at, ended_at = _silence_heartbeats_in_flight(thesis_mission, seed=5, paced=True)
     assert outcome.outcome is Outcome.LINK_LOST and "no heartbeat for" in outcome.message
     # HEARTBEATs came at 10 Hz of vehicle time: lost 5 vehicle s after the last, give or take a grant.
     assert 4.8 <= ended_at - silenced_at <= 5.5, (silenced_at, ended_at)

@@ -18,6 +18,7 @@ from .conftest import ROOT, THESIS_MISSION
 from .test_sitl import (_alive, _answers, _bridge_threads, _launches, _run_in_thread, _wait_airborne,
                         _wait_dead, _wait_for_launch, fake_sitl)
 from .tools.terminal import as_from_a_terminal
+from .waiting import until
 
 __all__ = ["fake_sitl"]  # the fixture, shared with test_sitl.py
 
@@ -33,11 +34,9 @@ def test_an_interrupted_sitl_campaign_leaves_no_sitl_process(fake_sitl, tmp_path
          "--workers", "2", "--quiet", "--sitl", str(script), "--sitl-speedup", "2"],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env={**os.environ},
         preexec_fn=as_from_a_terminal)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and len(_launches(logs)) < 2:
-        time.sleep(0.1)
-    launches = _launches(logs)
-    assert len(launches) >= 2, "two SITL processes should be running"
+    until(lambda: len(_launches(logs)) >= 2 or process.poll() is not None, timeout_s=60,
+          what="two SITL processes to be running")
+    assert len(_launches(logs)) >= 2, "two SITL processes should be running"
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=30)
     assert process.returncode == 130, stderr
@@ -45,18 +44,28 @@ def test_an_interrupted_sitl_campaign_leaves_no_sitl_process(fake_sitl, tmp_path
         _wait_dead(launch["pid"])
 
 
-@pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
-@pytest.mark.parametrize("physics", ["ardupilot", "preland"])
-def test_sitl_killed_mid_trial_ends_the_trial_as_error_naming_the_exit(fake_sitl, thesis_mission, physics):
-    script, logs = fake_sitl
-    pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
+def _signalled_in_flight(script, logs, mission, *, physics: str, signal_number: int) -> tuple:
+    """One trial on the stand-in, sent `signal_number` once its vehicle is airborne: (outcome, the launch,
+    wall seconds from the signal to the trial's end)."""
+    pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=mission, seed=2),
                                                          options=SitlOptions(binary=script, speedup=3.0,
                                                                              physics=physics)))
     launch = _wait_for_launch(logs)
     _wait_airborne(logs, launch)  # stopped in flight
-    os.kill(launch["pid"], signal.SIGKILL)
+    os.kill(launch["pid"], signal_number)
+    signalled_at = time.monotonic()
     outcome = future.result(timeout=60)
+    elapsed_s = time.monotonic() - signalled_at
     pool.shutdown()
+    return outcome, launch, elapsed_s
+
+
+@pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
+@pytest.mark.parametrize("physics", ["ardupilot", "preland"])
+def test_sitl_killed_mid_trial_ends_the_trial_as_error_naming_the_exit(fake_sitl, thesis_mission, physics):
+    script, logs = fake_sitl
+    outcome, launch, _ = _signalled_in_flight(script, logs, thesis_mission, physics=physics,
+                                              signal_number=signal.SIGKILL)
     assert outcome.outcome is Outcome.ERROR
     assert "killed by SIGKILL" in outcome.message and "SitlExited" in outcome.message
     assert any(e.kind == "armed" for e in outcome.events)  # what it recorded before is kept
@@ -72,16 +81,8 @@ def test_sitl_that_stops_answering_ends_as_link_lost_in_bounded_time(fake_sitl, 
     """A stopped SITL sends no servo packets either: the bridge, still waiting for one, does not hold the
     trial, which the lost link ends; the bridge then stops with it."""
     script, logs = fake_sitl
-    pool, future = _run_in_thread(lambda: run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
-                                                         options=SitlOptions(binary=script, speedup=3.0,
-                                                                             physics=physics)))
-    launch = _wait_for_launch(logs)
-    _wait_airborne(logs, launch)  # stopped in flight
-    os.kill(launch["pid"], signal.SIGSTOP)
-    stopped_at = time.monotonic()
-    outcome = future.result(timeout=60)
-    elapsed_s = time.monotonic() - stopped_at
-    pool.shutdown()
+    outcome, launch, elapsed_s = _signalled_in_flight(script, logs, thesis_mission, physics=physics,
+                                                      signal_number=signal.SIGSTOP)
     assert outcome.outcome is Outcome.LINK_LOST, outcome.message
     assert elapsed_s < 20.0
     _wait_dead(launch["pid"])
