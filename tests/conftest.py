@@ -1,6 +1,14 @@
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+# The suite runs its test processes side by side on every core (xdist), and each starts simulators, faces
+# and campaigns of its own: one thread each for OpenCV and the BLAS libraries, as campaign workers already
+# have (campaign/executors/local.py), so that pools of threads do not compete with the processes. Set before
+# cv2 or numpy is imported, here and in every process a test starts (they inherit the environment).
+for _name in ("OPENCV_FOR_THREADS_NUM", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
 
 import pytest
 
