@@ -201,3 +201,65 @@ def test_the_bridge_gives_up_after_its_bounded_wait():
         assert bridge.error.packets == 0
     finally:
         bridge.stop()
+
+
+# --- the air: the embedded simulator's wind, gusts and wash -----------------------------------------
+
+
+def test_a_vehicle_held_level_drifts_with_the_wind_until_it_moves_with_the_air():
+    # Level, at the hover PWM, in a steady 3 m/s wind towards the south: drag pushes it until its
+    # velocity over the ground is the air's (within 5 %); in still air it does not move (test above).
+    frame = QuadXFrame()
+    model = airborne(frame, altitude_m=20.0)
+    wind = (-3.0, 0.0, 0.0)
+    for _ in range(60 * RATE_HZ):
+        state = model.step([frame.hover_pwm_us()] * 4, DT_S, wind)
+    vn, ve, vd = state.velocity_ned_m_s
+    assert vn == pytest.approx(-3.0, rel=0.05) and abs(ve) < 1e-6
+    assert state.position_ned_m[0] < -100.0  # carried south, about 3 m/s for most of the minute
+
+
+def test_a_landed_vehicle_is_held_by_the_ground_not_blown_by_the_air():
+    # 5 m/s across and 2 m/s up, motors at 90 % of the hover thrust: held, level, until the motors lift it.
+    frame = QuadXFrame()
+    model = QuadXMultirotor(frame=frame)
+    below_hover = frame.command_to_pwm_us(frame.command_for_thrust_fraction(0.9 * frame.thrust_fraction(
+        frame.pwm_to_command(frame.hover_pwm_us()))))
+    for _ in range(2 * RATE_HZ):
+        state = model.step([below_hover] * 4, DT_S, (5.0, 0.0, -2.0))
+    assert state.on_ground and state.position_ned_m == (0.0, 0.0, 0.0) and state.velocity_ned_m_s == (0.0, 0.0, 0.0)
+    for _ in range(RATE_HZ):
+        state = model.step([frame.hover_pwm_us() + 100] * 4, DT_S, (5.0, 0.0, -2.0))
+    assert not state.on_ground and state.position_ned_m[2] < -0.1 and state.velocity_ned_m_s[0] > 0.1
+
+
+def test_the_bridge_flies_in_the_trial_seeds_air_and_tells_sitl_of_it():
+    from preland_app.sim.air import AirAtVehicle
+    from preland_app.sim.simulator import Simulator
+    from preland_app.sim.spec import EnvironmentSpec, GroundEffectSpec, WindSpec
+
+    # Steady wind only: what SITL is told is exactly the wind from the east, 2.5 m/s towards the west.
+    steady = EnvironmentSpec(wind=WindSpec(speed_m_s=2.5, direction_from_deg=90.0, turbulence_w20_m_s=0.0),
+                             ground_effect=GroundEffectSpec(sigma_m_s=0.0))
+    bridge = JsonBridge(model=airborne(), port=0, packet_timeout_s=10.0,
+                        air=AirAtVehicle(environment=steady, seed=3)).start()
+    sitl = StandInSitl(bridge.address)
+    try:
+        hover = [int(QuadXFrame().hover_pwm_us())] * 4 + [1000] * 12
+        replies = [sitl.exchange(frame, hover) for frame in range(2 * RATE_HZ)]
+    finally:
+        sitl.close()
+        bridge.stop()
+    for reply in replies:
+        assert reply["velocity_wind"] == pytest.approx([0.0, -2.5, 0.0], abs=1e-9)
+    assert replies[-1]["velocity"][1] < -0.05  # pushed west
+    # A direction left to the seed: the embedded simulator's for the same seed; stepped alike, its very gusts.
+    gusty = EnvironmentSpec(wind=WindSpec(speed_m_s=1.5, direction_from_deg=None, turbulence_w20_m_s=2.0))
+    for seed in (1, 2):
+        air, embedded = AirAtVehicle(environment=gusty, seed=seed), Simulator(seed=seed, environment=gusty).wind
+        assert air.wind.direction_from_deg == embedded.direction_from_deg
+        assert math.hypot(*air.wind.steady_ned_m_s) == pytest.approx(1.5)
+        winds = [air.step(dt_s=DT_S, height_m=10.0, velocity_ned_m_s=(0.0, 0.0, 0.0)) for _ in range(10 * RATE_HZ)]
+        assert winds == [embedded.step(dt_s=DT_S, altitude_m=10.0, airspeed_m_s=math.hypot(*embedded.current_ned_m_s[:2]))
+                         for _ in range(10 * RATE_HZ)]
+        assert max(abs(w[0] - winds[0][0]) for w in winds) > 0.05  # the gusts blow

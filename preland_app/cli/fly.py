@@ -159,7 +159,7 @@ def fly(
     sitl_physics: Optional[str] = typer.Option(
         None, "--sitl-physics", metavar="ardupilot|preland", rich_help_panel=SITL_PANEL,
         help="SITL's physics: ardupilot (its own, the default) or preland (preland's motor-level quad X over "
-             "SITL's JSON interface, which applies no wind)."),
+             "SITL's JSON interface, flying in preland's wind, gusts and rotor wash)."),
     sitl_defaults: list[Path] = typer.Option([], "--sitl-defaults", rich_help_panel=SITL_PANEL,
                                              help="More ArduPilot parameter defaults files, repeatable, applied "
                                                   "after the copter defaults (copter.parm of the binary's ArduPilot "

@@ -18,8 +18,10 @@ The physics is ArduPilot's own (`physics=ardupilot`, `--model +`) or preland's m
 (`physics=preland`): SITL then runs `--model JSON:127.0.0.1` and sends its motors' PWM, each physics
 step, to a `JsonBridge` serving from a thread of the trial's process on a port of its own
 (`--sim-port-out`), which answers with the next state; the frame's parameters (packaged
-sitl_json_quadx.parm) follow the copter defaults. SITL's JSON interface applies no wind, so the
-scenario's SIM_WIND_* do not blow on preland's physics. The bridge is stopped with its SITL.
+sitl_json_quadx.parm) follow the copter defaults. On preland's physics the air is the embedded
+simulator's (`sim/air.py`: the scenario's wind, Dryden gusts and rotor wash from the trial seed's
+streams), sent to SITL as `velocity_wind`; SITL's own SIM_WIND_* blow only on its own physics and are
+not set. The bridge is stopped with its SITL.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ from ..errors import PrelandError
 from ..outcome import TrialOutcome
 from ..sim.navigation import gps_drift
 from ..sim.noise import GaussianStream, child_rng
+from ..sim.air import AirAtVehicle
 from ..sim.json_bridge import JsonBridge, JsonBridgeTimeout
 from ..sim.multirotor import QuadXFrame, QuadXMultirotor
 from ..sim.spec import DEFAULT_HOME, NavigationSpec
@@ -303,8 +306,9 @@ class SitlInstance:
     """One running SITL process (use `async with`), with its JSON bridge when the physics is preland's."""
 
     def __init__(self, *, options: SitlOptions, params: dict[str, float], home=DEFAULT_HOME,
-                 heading_deg: float = 0.0) -> None:
+                 heading_deg: float = 0.0, air: AirAtVehicle | None = None) -> None:
         self.options = options
+        self.air = air  # preland's physics only: the air it flies in (None: still air)
         self.params = params
         self.home = home
         self.heading_deg = heading_deg
@@ -351,7 +355,8 @@ class SitlInstance:
         # mission's heading, as SITL's own physics does from --home.
         model = QuadXMultirotor(frame=QuadXFrame(), yaw_rad=math.radians(self.heading_deg))
         try:
-            self.bridge = JsonBridge(model=model, port=0, packet_timeout_s=BRIDGE_PACKET_TIMEOUT_S).start()
+            self.bridge = JsonBridge(model=model, port=0, packet_timeout_s=BRIDGE_PACKET_TIMEOUT_S,
+                                     air=self.air).start()
         except OSError as error:
             raise SitlError(f"cannot open the JSON physics port: {error.strerror or error}") from None
 
@@ -445,9 +450,13 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     options = replace(options, speedup=options.speedup_for(uses_camera=mission.land.strategy().uses_marker))
     gps = GpsErrorDriver(spec=mission.environment.navigation, seed=request.seed,
                          latitude_deg=DEFAULT_HOME.latitude_deg)
-    params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **rangefinder_params(mission), **sim_params(mission, request.seed),
+    on_preland_physics = options.physics == "preland"
+    wind = {} if on_preland_physics else sim_params(mission, request.seed)
+    params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **rangefinder_params(mission), **wind,
               **gps.params(), **mission.params, **options.extra_params}
-    async with SitlInstance(options=options, params=params, heading_deg=mission.initial_yaw_deg) as sitl:
+    air = AirAtVehicle(environment=mission.environment, seed=request.seed) if on_preland_physics else None
+    async with SitlInstance(options=options, params=params, heading_deg=mission.initial_yaw_deg,
+                            air=air) as sitl:
         tlog_path = None
         if options.tlog_dir is not None:
             tlog_path = str(Path(options.tlog_dir) / (tlog_name or f"{mission.name}_seed{request.seed}.tlog"))
@@ -457,8 +466,9 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     outcome.details["sitl_instance"] = sitl.instance
     outcome.details["sitl_speedup"] = options.speedup
     outcome.details["sitl_physics"] = options.physics
-    if options.physics == "preland":
-        outcome.details["sitl_wind"] = "none: SITL's JSON interface applies no wind"
+    if air is not None:
+        outcome.details["sitl_wind"] = "preland's air: wind, gusts and rotor wash from the trial seed"
+        outcome.details["wind_from_deg"] = round(air.wind.direction_from_deg, 1)
     if sitl.bridge is not None:
         outcome.details["sitl_json_packets"] = sitl.bridge.counters.packets
     outcome.details["sitl_gps_error_cm"] = [round(v * 100.0, 1) for v in gps.error_ned_m]

@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass
 
 from ..errors import PrelandError
+from .air import AirAtVehicle
 from .multirotor import MultirotorState, QuadXMultirotor
 from .sitl_json import DEFAULT_PORT, SitlJsonError, build_reply, parse_servo_packet
 
@@ -57,10 +58,11 @@ class JsonBridge:
 
     def __init__(self, *, model: QuadXMultirotor, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  packet_timeout_s: float = 30.0, send_rangefinder: bool = True,
-                 battery_voltage_v: float | None = None) -> None:
+                 battery_voltage_v: float | None = None, air: AirAtVehicle | None = None) -> None:
         if packet_timeout_s <= 0:
             raise ValueError("packet_timeout_s must be positive")
         self.model = model
+        self.air = air  # None: still air
         self.packet_timeout_s = float(packet_timeout_s)
         self._send_rangefinder = send_rangefinder
         self._battery_voltage_v = battery_voltage_v
@@ -160,11 +162,17 @@ class JsonBridge:
                 self._resets += 1
             elif last is not None and packet.frame_count > last + 1:
                 self._skipped += packet.frame_count - last - 1
-            state = self.model.step(packet.pwm_us, packet.dt_s)
+            wind = None
+            if self.air is None:
+                state = self.model.step(packet.pwm_us, packet.dt_s)
+            else:
+                wind = self.air.step(dt_s=packet.dt_s, height_m=self.model.height_above_ground_m,
+                                     velocity_ned_m_s=self.model.velocity_ned_m_s)
+                state = self.model.step(packet.pwm_us, packet.dt_s, wind)
             self._steps += 1
             self._last_frame = packet.frame_count
             self._last_reply = build_reply(state, include_rangefinder=self._send_rangefinder,
-                                           battery_voltage_v=self._battery_voltage_v).encode()
+                                           battery_voltage_v=self._battery_voltage_v, wind_ned_m_s=wind).encode()
             self._latest = state
             return self._last_reply
 

@@ -2,7 +2,8 @@
 
 Rigid-body 6-DOF motion in NED (earth) and FRD (body) frames, driven by four motors whose PWM goes
 through ArduPilot's thrust curve, a first-order motor lag, per-motor yaw torque, quadratic body drag,
-per-motor momentum drag, rotational damping, gravity and a ground the vehicle rests on.
+per-motor momentum drag, rotational damping, gravity and a ground the vehicle rests on. The drag and the
+rotors see the velocity through the air (the vehicle's minus the wind's, as `SIM_Frame::calculate_forces`).
 
 Every magnitude comes from ArduPilot's own SITL multicopter model, so that ArduCopter's default gains
 (tuned on that model) fly it:
@@ -274,8 +275,11 @@ class QuadXMultirotor:
 
     # --- one step -------------------------------------------------------------------------------
 
-    def step(self, pwm_us: Sequence[float], dt_s: float) -> MultirotorState:
-        """Advance by `dt_s` simulated seconds with motor i+1 at `pwm_us[i]` (us); return the new state."""
+    def step(self, pwm_us: Sequence[float], dt_s: float,
+             wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> MultirotorState:
+        """Advance by `dt_s` simulated seconds with motor i+1 at `pwm_us[i]` (us) in air moving at
+        `wind_ned_m_s` (NED, m/s: the drag and the rotors see the velocity relative to it); return the
+        new state."""
         if dt_s <= 0:
             raise ValueError(f"dt_s must be positive, not {dt_s}")
         f = self.frame
@@ -288,10 +292,16 @@ class QuadXMultirotor:
         w, x, y, z = self._q
         r = _rotation_body_to_ned(w, x, y, z)
         vn, ve, vd = self._v
-        # air velocity in body FRD (no wind)
-        vb = (r[0][0] * vn + r[1][0] * ve + r[2][0] * vd,
-              r[0][1] * vn + r[1][1] * ve + r[2][1] * vd,
-              r[0][2] * vn + r[1][2] * ve + r[2][2] * vd)
+        if self._on_ground:
+            # Resting, the vehicle is held by the ground, not the air (as the embedded simulator's and
+            # SITL's GROUND_BEHAVIOR_NO_MOVEMENT): it lifts off on its motors' thrust alone, so a gust
+            # cannot bounce a landed vehicle (whose vertical gust vanishes at the ground anyway).
+            wind_ned_m_s = (0.0, 0.0, 0.0)
+        an_, ae_, ad_ = vn - wind_ned_m_s[0], ve - wind_ned_m_s[1], vd - wind_ned_m_s[2]
+        # velocity through the air, in body FRD
+        vb = (r[0][0] * an_ + r[1][0] * ae_ + r[2][0] * ad_,
+              r[0][1] * an_ + r[1][1] * ae_ + r[2][1] * ad_,
+              r[0][2] * an_ + r[1][2] * ae_ + r[2][2] * ad_)
         gx, gy, gz = self._w
         fx = fy = fz = 0.0
         tx = ty = tz = 0.0
@@ -377,6 +387,16 @@ class QuadXMultirotor:
         return [-r[2][0] * GRAVITY_M_S2, -r[2][1] * GRAVITY_M_S2, -r[2][2] * GRAVITY_M_S2]
 
     # --- readings -------------------------------------------------------------------------------
+
+    @property
+    def height_above_ground_m(self) -> float:
+        """The body origin's height above the ground plane (m)."""
+        return self.ground_down_m - self._p[2]
+
+    @property
+    def velocity_ned_m_s(self) -> tuple[float, float, float]:
+        """The velocity over the ground (NED, m/s)."""
+        return self._v[0], self._v[1], self._v[2]
 
     def rangefinder_down_m(self) -> float:
         """A body-down rangefinder's distance to the ground plane (m), `rangefinder_max_m` when none."""

@@ -15,10 +15,8 @@ from ..clock import Clock
 from ..geo import GeoPoint
 from .autopilot import Autopilot
 from .dynamics import BodyState, MultirotorDynamics, Touchdown
-from .environment import WindModel
-from .ground_effect import GroundEffectFlow
+from .air import AirAtVehicle
 from .navigation import NavEstimate, NavigationModel, tilt_cosine
-from .noise import child_rng
 from .params import ParameterTable
 from .spec import DEFAULT_HOME, EnvironmentSpec
 
@@ -58,9 +56,8 @@ class Simulator:
         self.dt_s = 1.0 / self.environment.physics_rate_hz
         self.time_s = 0.0
         self.params = ParameterTable(params)
-        self.wind = WindModel(spec=self.environment.wind, rng=child_rng(seed, "wind"))
-        self.ground_effect = GroundEffectFlow(spec=self.environment.ground_effect,
-                                              rng=child_rng(seed, "ground_effect"))
+        self.air = AirAtVehicle(environment=self.environment, seed=seed)
+        self.wind = self.air.wind
         self.navigation = NavigationModel(
             spec=self.environment.navigation,
             rangefinder_min_m=self.params.m_s("RNGFND1_MIN_CM"),
@@ -92,12 +89,8 @@ class Simulator:
         """Advance the world by one physics step."""
         dt_s = self.dt_s
         s = self.dynamics.state
-        airspeed = math.hypot(s.velocity_north_m_s - self.wind.current_ned_m_s[0],
-                              s.velocity_east_m_s - self.wind.current_ned_m_s[1])
-        wind = self.wind.step(dt_s=dt_s, altitude_m=-s.down_m, airspeed_m_s=airspeed)
-        if self.ground_effect.enabled:
-            wash_north, wash_east = self.ground_effect.step(dt_s=dt_s, height_m=-s.down_m)
-            wind = (wind[0] + wash_north, wind[1] + wash_east, wind[2])
+        wind = self.air.step(dt_s=dt_s, height_m=-s.down_m,
+                             velocity_ned_m_s=(s.velocity_north_m_s, s.velocity_east_m_s, s.velocity_down_m_s))
         demand = self.autopilot.step(dt_s=dt_s, now_s=self.time_s, nav=self.nav, yaw_rad=s.yaw_rad,
                                      touching_ground=s.on_ground, roll_rad=s.roll_rad, pitch_rad=s.pitch_rad)
         self.dynamics.step(dt_s=dt_s, time_s=self.time_s + dt_s, demand=demand, wind_ned_m_s=wind)

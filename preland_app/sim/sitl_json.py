@@ -105,12 +105,15 @@ def _finite(values: Sequence[float], name: str) -> list[float]:
 
 
 def build_reply(state: MultirotorState, *, include_euler: bool = False, include_rangefinder: bool = True,
-                battery_voltage_v: float | None = None) -> str:
+                battery_voltage_v: float | None = None,
+                wind_ned_m_s: tuple[float, float, float] | None = None) -> str:
     """The reply text for `state`: newline, one JSON object without spaces, newline.
 
     Sends `quaternion` (w, x, y, z; body FRD to NED), and `attitude` too when `include_euler`; `rng_1`
     is the downward rangefinder's distance (m) when `include_rangefinder`; `battery.voltage` (V) when
-    given. The timestamp is the model's simulated time (s).
+    given; `velocity_wind` (NED, m/s: SITL's wind estimate's truth, for its logs and an airspeed sensor)
+    when `wind_ned_m_s` is given, last, since SIM_JSON finds keys by substring and `velocity` must match
+    first. The timestamp is the model's simulated time (s).
     """
     reply: dict[str, object] = {
         "timestamp": float(state.time_s),
@@ -126,6 +129,8 @@ def build_reply(state: MultirotorState, *, include_euler: bool = False, include_
         reply["rng_1"] = float(state.rangefinder_down_m)
     if battery_voltage_v is not None:
         reply["battery"] = {"voltage": float(battery_voltage_v)}
+    if wind_ned_m_s is not None:
+        reply["velocity_wind"] = _finite(wind_ned_m_s, "velocity_wind")
     return "\n" + json.dumps(reply, separators=(",", ":"), allow_nan=False) + "\n"
 
 
@@ -146,7 +151,7 @@ def parse_reply_like_sim_json(text: str) -> dict[str, object]:
     line = lines[-2]  # between the last two newlines
     found: dict[str, object] = {}
     keys = [(s, k, True) for s, k in REQUIRED_KEYS] + [("", k, False) for k in ATTITUDE_KEYS] + [
-        ("", f"rng_{i}", False) for i in range(1, 7)] + [("battery", "voltage", False)]
+        ("", f"rng_{i}", False) for i in range(1, 7)] + [("battery", "voltage", False), ("", "velocity_wind", False)]
     for section, key, required in keys:
         start = line.find(section)
         if start < 0 or not line:
@@ -160,7 +165,7 @@ def parse_reply_like_sim_json(text: str) -> dict[str, object]:
                 raise SitlJsonError(f"no key {section}/{key}")
             continue
         value = line[at + len(key) + 2:]
-        if key in ("gyro", "accel_body", "position", "velocity", "attitude", "quaternion"):
+        if key in ("gyro", "accel_body", "position", "velocity", "attitude", "quaternion", "velocity_wind"):
             n = 4 if key == "quaternion" else 3
             pattern = r"\[" + r",\s*".join([f"({_FLOAT})"] * n) + r"\]"
             match = re.match(pattern, value)

@@ -1,0 +1,36 @@
+"""The air at the vehicle: the scenario's wind and Dryden gusts plus the rotor wash near the ground, one
+model for every physics preland runs (the embedded simulator's, and its quad X under ArduPilot SITL).
+
+Both draw from the trial seed's `wind` and `ground_effect` streams, so a seed blows the same steady wind
+from the same direction on both, with the same gust and wash statistics; the gust path itself depends on
+the step each physics takes (the embedded simulator's `physics_rate_hz`, SITL's loop rate).
+"""
+
+from __future__ import annotations
+
+import math
+
+from .environment import WindModel
+from .ground_effect import GroundEffectFlow
+from .noise import child_rng
+from .spec import EnvironmentSpec
+
+
+class AirAtVehicle:
+    """The velocity of the air at the vehicle, NED in m/s, stepped with the vehicle's motion."""
+
+    def __init__(self, *, environment: EnvironmentSpec, seed: int) -> None:
+        self.wind = WindModel(spec=environment.wind, rng=child_rng(seed, "wind"))
+        self.ground_effect = GroundEffectFlow(spec=environment.ground_effect, rng=child_rng(seed, "ground_effect"))
+
+    def step(self, *, dt_s: float, height_m: float, velocity_ned_m_s: tuple[float, float, float]
+             ) -> tuple[float, float, float]:
+        """Advance by `dt_s` with the vehicle `height_m` above the ground moving at `velocity_ned_m_s`
+        (m/s); returns the air's velocity (NED, m/s): wind, gusts and, near the ground, the wash."""
+        current = self.wind.current_ned_m_s  # the gusts' speed scale follows the airspeed of the last step
+        airspeed_m_s = math.hypot(velocity_ned_m_s[0] - current[0], velocity_ned_m_s[1] - current[1])
+        wind = self.wind.step(dt_s=dt_s, altitude_m=height_m, airspeed_m_s=airspeed_m_s)
+        if self.ground_effect.enabled:
+            wash_north, wash_east = self.ground_effect.step(dt_s=dt_s, height_m=height_m)
+            wind = (wind[0] + wash_north, wind[1] + wash_east, wind[2])
+        return wind
