@@ -232,6 +232,9 @@ def test_sitl_gets_a_rangefinder_and_a_per_trial_gps_error(fake_sitl, thesis_mis
     (launch,) = _launches(logs)
     files = launch["argv"][launch["argv"].index("--defaults") + 1].split(",")
     assert files[0].endswith("sitl_copter.parm")
+    # SITL's own wind blows from the embedded simulator's direction for the seed, and the trial says so.
+    assert outcome.details["wind_from_deg"] == run_trial(TrialRequest(mission=thesis_mission, seed=4)
+                                                         ).details["wind_from_deg"]
 
 
 def test_the_physics_ardupilot_or_preland_comes_from_the_url_or_the_options(tmp_path):

@@ -225,12 +225,10 @@ def sim_params(mission: MissionSpec, seed: int) -> dict[str, float]:
     gust standard deviation (Dryden sigma_u) at 10 m, the thesis' flight height. The two spectra differ:
     SITL's gust turns to a random direction at every physics step, so its push mostly averages out.
     """
-    from ..sim.environment import dryden_scales
+    from ..sim.environment import WindModel, dryden_scales
 
     wind = mission.environment.wind
-    direction = wind.direction_from_deg
-    if direction is None:
-        direction = float(child_rng(seed, "wind").uniform(0.0, 360.0))
+    direction = WindModel(spec=wind, rng=child_rng(seed, "wind")).direction_from_deg  # the seed's draw
     _, _, sigma_u_m_s, _ = dryden_scales(altitude_m=10.0, w20_m_s=wind.turbulence_w20_m_s)
     return {"SIM_WIND_SPD": wind.speed_m_s, "SIM_WIND_DIR": direction, "SIM_WIND_T": SIM_WIND_T_NO_LIMIT,
             "SIM_WIND_TURB": round(sigma_u_m_s, 3)}
@@ -467,8 +465,9 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     outcome.details["sitl_speedup"] = options.speedup
     outcome.details["sitl_physics"] = options.physics
     if air is not None:
-        outcome.details["sitl_wind"] = "preland's air: wind, gusts and rotor wash from the trial seed"
         outcome.details["wind_from_deg"] = round(air.wind.direction_from_deg, 1)
+    else:
+        outcome.details["wind_from_deg"] = round(wind["SIM_WIND_DIR"], 1)
     if sitl.bridge is not None:
         outcome.details["sitl_json_packets"] = sitl.bridge.counters.packets
     outcome.details["sitl_gps_error_cm"] = [round(v * 100.0, 1) for v in gps.error_ned_m]

@@ -162,13 +162,10 @@ class JsonBridge:
                 self._resets += 1
             elif last is not None and packet.frame_count > last + 1:
                 self._skipped += packet.frame_count - last - 1
-            wind = None
-            if self.air is None:
-                state = self.model.step(packet.pwm_us, packet.dt_s)
-            else:
-                wind = self.air.step(dt_s=packet.dt_s, height_m=self.model.height_above_ground_m,
-                                     velocity_ned_m_s=self.model.velocity_ned_m_s)
-                state = self.model.step(packet.pwm_us, packet.dt_s, wind)
+            wind = None if self.air is None else self.air.step(
+                dt_s=packet.dt_s, height_m=self.model.height_above_ground_m,
+                velocity_ned_m_s=self.model.velocity_ned_m_s)
+            state = self.model.step(packet.pwm_us, packet.dt_s, wind or (0.0, 0.0, 0.0))
             self._steps += 1
             self._last_frame = packet.frame_count
             self._last_reply = build_reply(state, include_rangefinder=self._send_rangefinder,
