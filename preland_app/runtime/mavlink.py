@@ -74,7 +74,7 @@ class SimStateTruth:
 async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, link_timeout_s: float = 5.0,
                       tlog_path: str | None = None, fault_listen: str | None = None, preflight: bool = False,
                       camera_source: str | None = None, frame_source=None, detection_log: str | None = None,
-                      video_path: str | None = None, paced: bool = False,
+                      video_path: str | None = None, paced: bool = False, lockstep=None, sensor_truth=None,
                       companions: Sequence[Callable[[MavlinkVehicle], Awaitable[None]]] = ()) -> TrialOutcome:
     """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time).
     `tlog_path`: write every MAVLink message received to this telemetry log. `fault_listen`: a UDP address
@@ -84,11 +84,14 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     `video_path` keep every detection and every frame the companion saw. `companions`: coroutines run beside
     the trial from the start (a SITL watchdog, a GPS-error driver); one that raises ends the trial with that
     error. `paced`: the vehicle is preland's simulator, flown in lock-step (PRELAND_PACE): every sensor reading
-    at its vehicle time however slow this machine is."""
+    at its vehicle time however slow this machine is. `lockstep` (a `LockstepClock`): the vehicle is SITL on
+    a physics in this process that owns time, and this is its clock; `sensor_truth` (with `pose()` and
+    `time_s()`): where the simulated sensors see the world from, instead of SIM_STATE (that physics' own
+    state, exact at each reading's time)."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
     vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path,
-                             paced=paced)
+                             paced=paced, lockstep=lockstep)
     clock = vehicle.clock
     events = EventLog(clock)
     side_tasks = [asyncio.ensure_future(companion(vehicle)) for companion in companions]
@@ -100,14 +103,16 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         await _stop(side_tasks)
         await vehicle.close()
         raise
+    connected_s = await lockstep.start_at() if lockstep is not None else None
     truth_source = None
     if truth:
         truth_source = SimStateTruth(vehicle)
         truth_source.start()
     real_camera = frame_source or (_open_camera(camera_source, mission, clock) if camera_source else None)
+    seen_from = sensor_truth or truth_source
     sensors = build_sensor_suite(mission=mission, seed=request.seed,
-                                 true_pose=truth_source.pose if truth_source else _no_truth, clock=clock,
-                                 pose_time_s=truth_source.time_s if truth_source else None,
+                                 true_pose=seen_from.pose if seen_from else _no_truth, clock=clock,
+                                 pose_time_s=seen_from.time_s if seen_from else None,
                                  camera=strategy.uses_marker and real_camera is None, irlock=strategy.uses_irlock)
     if real_camera is not None:
         sensors.camera = real_camera
@@ -191,6 +196,9 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     details["clock_rate"] = round(clock.rate, 2)
     if paced:
         details["paced_grants"] = clock.grants
+    if lockstep is not None:
+        details["lockstep_wakes"] = lockstep.wakes
+        details["lockstep_connected_s"] = round(connected_s, 3)
     # Sensor ticks that gave nothing because no SIM_STATE had come since the last reading.
     waits = [getattr(source, "ticks_without_new_truth", None) for source in (sensors.camera, sensors.irlock)]
     if any(count is not None for count in waits):

@@ -22,6 +22,12 @@ sitl_json_quadx.parm) follow the copter defaults. On preland's physics the air i
 simulator's (`sim/air.py`: the scenario's wind, Dryden gusts and rotor wash from the trial seed's
 streams), sent to SITL as `velocity_wind`; SITL's own SIM_WIND_* blow only on its own physics and are
 not set. The bridge is stopped with its SITL.
+
+On preland's physics the trial runs in lock-step with it (`vehicle.lockstep_clock`): the companion's
+clock is the physics' time, each camera frame and IR-LOCK reading shows the physics' state at its own
+vehicle time (not SIM_STATE, which comes later and at its stream's rate), and the physics does not step
+past that time until the reading's LANDING_TARGET is sent. --speedup is then SPEEDUP_LOCKSTEP, more than
+the two can reach, so SITL never sleeps: the pace is the physics' and the companion's.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from __future__ import annotations
 import asyncio
 import ctypes
 import fcntl
+import functools
 import math
 import os
 import signal
@@ -48,6 +55,8 @@ from ..sim.air import AirAtVehicle
 from ..sim.json_bridge import JsonBridge, JsonBridgeTimeout
 from ..sim.multirotor import QuadXFrame, QuadXMultirotor
 from ..sim.spec import DEFAULT_HOME, NavigationSpec
+from ..sensing.virtual_camera import CameraPose
+from ..vehicle.lockstep_clock import MISSION_START_S, LockstepClock
 from ..vehicle.mavlink_backend import MavlinkVehicle
 from .base import RuntimeOptionError, TrialRequest, build_options
 from .mavlink import fly_mavlink
@@ -76,6 +85,9 @@ SIM_WIND_T_NO_LIMIT = 1  # SITL's WindLimitType: the same mean wind at every hei
 # without frames (IR-LOCK, GPS) keep their rate at 10x.
 SPEEDUP_CAMERA = 2.0
 SPEEDUP_NO_CAMERA = 10.0
+# On preland's physics in lock-step, a ceiling SITL never reaches (it would sleep above it): the rate is
+# what SITL, the physics and the companion together manage (benchmarks/sitl_lockstep.py).
+SPEEDUP_LOCKSTEP = 1000.0
 GPS_UPDATE_PERIOD_S = 2.0  # vehicle seconds between SIM_GPS_GLITCH updates (the error wanders over ~10 s)
 METRES_PER_DEG_LAT = 111_319.49  # WGS-84 equatorial, as ArduPilot's LATLON_TO_M
 
@@ -132,9 +144,12 @@ class SitlOptions:
     physics: str = "ardupilot"
 
     def speedup_for(self, *, uses_camera: bool) -> float:
-        """The --speedup of a trial whose land mode does (or does not) read camera frames."""
+        """The --speedup of a trial whose land mode does (or does not) read camera frames; on preland's
+        physics, in lock-step, SPEEDUP_LOCKSTEP whatever the land mode."""
         if self.speedup is not None:
             return self.speedup
+        if self.physics == "preland":
+            return SPEEDUP_LOCKSTEP
         return SPEEDUP_CAMERA if uses_camera else SPEEDUP_NO_CAMERA
 
     def defaults_files(self) -> tuple[Path, ...]:
@@ -255,7 +270,7 @@ class GpsErrorDriver:
     def __init__(self, *, spec: NavigationSpec, seed: int, latitude_deg: float) -> None:
         self._north, self._east = gps_drift(spec, GaussianStream(child_rng(seed, "sitl_gps")))
         self._metres_per_deg_lon = METRES_PER_DEG_LAT * max(math.cos(math.radians(latitude_deg)), 1e-6)
-        self.updates = 0
+        self.updates = 0  # periods the error has moved on
 
     @property
     def error_ned_m(self) -> tuple[float, float]:
@@ -271,19 +286,23 @@ class GpsErrorDriver:
         self._east.step(dt_s)
         return self.params()
 
-    async def run(self, vehicle: MavlinkVehicle) -> None:
-        """Move the error along in vehicle time for as long as the trial flies."""
+    async def run(self, vehicle: MavlinkVehicle, *, first_update_s: float = 0.0) -> None:
+        """Move the error along in vehicle time for as long as the trial flies: at every multiple of
+        GPS_UPDATE_PERIOD_S from `first_update_s` on, the error of that many periods is written, so the
+        error SITL has at a vehicle time does not depend on when the companion connected."""
         while not vehicle.connected:
             await asyncio.sleep(0.05)
         clock = vehicle.clock
-        last_s = clock.now_s()
+        period_s = GPS_UPDATE_PERIOD_S
         while True:
-            await clock.sleep(GPS_UPDATE_PERIOD_S)
             now_s = clock.now_s()
-            for name, value in self.step(max(now_s - last_s, 0.0)).items():
+            tick = max(math.floor(now_s / period_s + 1e-9) + 1, math.ceil(first_update_s / period_s - 1e-9))
+            await clock.sleep(tick * period_s - now_s)
+            while self.updates < tick:
+                self.step(period_s)
+                self.updates += 1
+            for name, value in self.params().items():
                 await vehicle.set_param(name, value)
-            last_s = now_s
-            self.updates += 1
 
 
 def _free_udp_port() -> int:
@@ -441,6 +460,24 @@ class SitlInstance:
             self._folder = None
 
 
+class BridgeTruth:
+    """Where the simulated sensors see the world from on preland's physics: the JSON bridge's newest state
+    (NED m from the model's origin, which is SITL's home and the trial's start; attitude in rad), exact
+    at a reading's time since the physics holds there for it."""
+
+    def __init__(self, bridge: JsonBridge) -> None:
+        self.bridge = bridge
+
+    def pose(self) -> CameraPose:
+        state = self.bridge.latest_state
+        north_m, east_m, down_m = state.position_ned_m
+        return CameraPose(north_m, east_m, down_m, *state.euler_rad)
+
+    def time_s(self) -> float:
+        """The physics time (vehicle s) of that state."""
+        return self.bridge.latest_state.time_s
+
+
 async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: str | None = None) -> TrialOutcome:
     """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE). SITL ending during
     the trial ends it with outcome `error` naming how SITL ended."""
@@ -458,8 +495,15 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
         tlog_path = None
         if options.tlog_dir is not None:
             tlog_path = str(Path(options.tlog_dir) / (tlog_name or f"{mission.name}_seed{request.seed}.tlog"))
+        lockstep = LockstepClock(gate=sitl.bridge.gate) if sitl.bridge is not None else None
+        # In lock-step the GPS error moves on from the mission's start, which is at the same vehicle time
+        # in every trial, so SITL's GPS is the same whenever the companion connected.
+        start_s = MISSION_START_S if lockstep is not None else 0.0
         outcome = await fly_mavlink(request, url=sitl.url, truth=True, tlog_path=tlog_path,
-                                    fault_listen=options.fault_listen, companions=(sitl.watch, gps.run))
+                                    fault_listen=options.fault_listen,
+                                    companions=(sitl.watch, functools.partial(gps.run, first_update_s=start_s)),
+                                    lockstep=lockstep,
+                                    sensor_truth=BridgeTruth(sitl.bridge) if sitl.bridge is not None else None)
     outcome.details["runtime"] = "sitl"
     outcome.details["sitl_instance"] = sitl.instance
     outcome.details["sitl_speedup"] = options.speedup
@@ -469,7 +513,10 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     else:
         outcome.details["wind_from_deg"] = round(wind["SIM_WIND_DIR"], 1)
     if sitl.bridge is not None:
-        outcome.details["sitl_json_packets"] = sitl.bridge.counters.packets
+        counters = sitl.bridge.counters
+        outcome.details["sitl_json_packets"] = counters.packets
+        outcome.details["lockstep_holds"] = counters.holds
+        outcome.details["lockstep_held_wall_s"] = round(counters.held_wall_s, 2)
     outcome.details["sitl_gps_error_cm"] = [round(v * 100.0, 1) for v in gps.error_ned_m]
     return outcome
 

@@ -8,6 +8,14 @@ physics: wall time is used only to bound how long the bridge waits for a packet.
   reply again, without stepping;
 - a higher frame_count than the next one (packets lost) is stepped once, as any new packet;
 - a lower frame_count means SITL restarted: the model is reset and its time starts again from 0.
+
+`gate` (a `StepGate`) lets the companion hold the physics at a vehicle time (a camera frame's, an
+IR-LOCK reading's) until it has made that reading and sent its LANDING_TARGET: the packet that would step
+past it waits. Datagrams SITL resent meanwhile (the same frame_count, after 1 s without an answer) are
+dropped once the answer leaves, so SITL gets one answer per frame and never reads a stale one later.
+
+SITL is told the model's state through `SensorSmoothing` (SITL's own smooth_sensors); `latest_state`
+stays the model's true state.
 """
 
 from __future__ import annotations
@@ -21,6 +29,8 @@ from ..errors import PrelandError
 from .air import AirAtVehicle
 from .multirotor import MultirotorState, QuadXMultirotor
 from .sitl_json import DEFAULT_PORT, SitlJsonError, build_reply, parse_servo_packet
+from .sensor_smoothing import SensorSmoothing
+from .step_gate import StepGate
 
 _POLL_S = 0.05  # how often a waiting bridge looks at its stop flag (wall s)
 _MAX_PACKET_BYTES = 2048
@@ -46,6 +56,9 @@ class BridgeCounters:
     frames_skipped: int
     bad_packets: int
     last_frame_count: int | None
+    holds: int
+    held_wall_s: float
+    resends_dropped: int
 
 
 class JsonBridge:
@@ -78,6 +91,10 @@ class JsonBridge:
         self._last_reply: bytes = b""
         self._packets = self._steps = self._repeats = self._resets = self._skipped = self._bad = 0
         self._latest: MultirotorState = model.state
+        self._dropped = 0
+        self._pending: tuple[bytes, object] | None = None  # a datagram read while dropping resends
+        self.gate = StepGate()
+        self._smoothing = SensorSmoothing()  # what SITL is told, as SITL's own physics tells it
         self.error: BaseException | None = None
 
     # --- life cycle -----------------------------------------------------------------------------
@@ -128,7 +145,10 @@ class JsonBridge:
         deadline = time.monotonic() + self.packet_timeout_s  # wall time bounds the wait only
         while not self._stop.is_set() and (max_packets is None or served < max_packets):
             try:
-                data, sender = self._sock.recvfrom(_MAX_PACKET_BYTES)
+                if self._pending is not None:
+                    (data, sender), self._pending = self._pending, None
+                else:
+                    data, sender = self._sock.recvfrom(_MAX_PACKET_BYTES)
             except socket.timeout:
                 if time.monotonic() > deadline:
                     raise JsonBridgeTimeout(timeout_s=self.packet_timeout_s, packets=self._packets) from None
@@ -140,8 +160,33 @@ class JsonBridge:
             deadline = time.monotonic() + self.packet_timeout_s
             reply = self.handle(data)
             if reply is not None:
+                self._drop_resends()
                 self._sock.sendto(reply, sender)
             served += 1
+
+    def _drop_resends(self) -> None:
+        """Drop the resends of the frame about to be answered already waiting; keep anything else."""
+        self._sock.settimeout(0.0)  # a timeout would make even MSG_DONTWAIT wait for it
+        try:
+            self._drop_waiting_resends()
+        finally:
+            self._sock.settimeout(_POLL_S)
+
+    def _drop_waiting_resends(self) -> None:
+        while True:
+            try:
+                data, sender = self._sock.recvfrom(_MAX_PACKET_BYTES)
+            except (BlockingIOError, InterruptedError):
+                return
+            try:
+                repeat = parse_servo_packet(data).frame_count == self._last_frame
+            except SitlJsonError:
+                repeat = False
+            if not repeat:
+                self._pending = (data, sender)
+                return
+            with self._lock:
+                self._dropped += 1
 
     def handle(self, data: bytes) -> bytes | None:
         """The reply to one datagram (None for one that is not a servo packet); steps the model."""
@@ -159,19 +204,27 @@ class JsonBridge:
                 return self._last_reply
             if last is not None and packet.frame_count < last:
                 self.model.reset()  # SITL restarted: so does the physics
+                self._smoothing.reset()
                 self._resets += 1
             elif last is not None and packet.frame_count > last + 1:
                 self._skipped += packet.frame_count - last - 1
+        if last is not None and packet.frame_count < last:
+            self.gate.reset()
+        self.gate.wait_to_step(stop=self._stop)  # held for a reading at this time: SITL waits with us
+        with self._lock:
             wind = None if self.air is None else self.air.step(
                 dt_s=packet.dt_s, height_m=self.model.height_above_ground_m,
                 velocity_ned_m_s=self.model.velocity_ned_m_s)
             state = self.model.step(packet.pwm_us, packet.dt_s, wind or (0.0, 0.0, 0.0))
             self._steps += 1
             self._last_frame = packet.frame_count
-            self._last_reply = build_reply(state, include_rangefinder=self._send_rangefinder,
+            told = self._smoothing.smoothed(state)
+            self._last_reply = build_reply(told, include_rangefinder=self._send_rangefinder,
                                            battery_voltage_v=self._battery_voltage_v, wind_ned_m_s=wind).encode()
             self._latest = state
-            return self._last_reply
+            reply = self._last_reply
+        self.gate.stepped(state.time_s)
+        return reply
 
     # --- readings for other threads ---------------------------------------------------------------
 
@@ -186,4 +239,5 @@ class JsonBridge:
         with self._lock:
             return BridgeCounters(packets=self._packets, steps=self._steps, repeats=self._repeats,
                                   resets=self._resets, frames_skipped=self._skipped, bad_packets=self._bad,
-                                  last_frame_count=self._last_frame)
+                                  last_frame_count=self._last_frame, holds=self.gate.holds,
+                                  held_wall_s=self.gate.held_wall_s, resends_dropped=self._dropped)

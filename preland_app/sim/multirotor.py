@@ -219,7 +219,8 @@ class MultirotorState:
         return roll, pitch, yaw
 
 
-def _rotation_body_to_ned(w: float, x: float, y: float, z: float) -> tuple[tuple[float, float, float], ...]:
+def rotation_body_to_ned(w: float, x: float, y: float, z: float) -> tuple[tuple[float, float, float], ...]:
+    """The rotation matrix (rows) taking body FRD vectors to NED, from the unit quaternion (w, x, y, z)."""
     return ((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
             (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
             (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
@@ -290,7 +291,7 @@ class QuadXMultirotor:
             self._c[i] += min(max(change, -slew), slew)  # SIM_Motor's slew limit on the command
 
         w, x, y, z = self._q
-        r = _rotation_body_to_ned(w, x, y, z)
+        r = rotation_body_to_ned(w, x, y, z)
         vn, ve, vd = self._v
         if self._on_ground:
             # Resting, the vehicle is held by the ground, not the air (as the embedded simulator's and
@@ -383,7 +384,7 @@ class QuadXMultirotor:
 
     def _rest_specific_force(self) -> list[float]:
         # the ground's reaction: minus gravity, seen in body FRD
-        r = _rotation_body_to_ned(*self._q)
+        r = rotation_body_to_ned(*self._q)
         return [-r[2][0] * GRAVITY_M_S2, -r[2][1] * GRAVITY_M_S2, -r[2][2] * GRAVITY_M_S2]
 
     # --- readings -------------------------------------------------------------------------------
@@ -400,7 +401,7 @@ class QuadXMultirotor:
 
     def rangefinder_down_m(self) -> float:
         """A body-down rangefinder's distance to the ground plane (m), `rangefinder_max_m` when none."""
-        r22 = _rotation_body_to_ned(*self._q)[2][2]
+        r22 = rotation_body_to_ned(*self._q)[2][2]
         height_m = self.ground_down_m - self._p[2]
         if r22 <= 0.1:
             return self.rangefinder_max_m

@@ -33,6 +33,7 @@ from typing import Any
 from ..mavlink.dialect import xml_text
 from ..mavlink.endpoint import parse_endpoint
 from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
+from .lockstep_clock import EXCHANGE_STEP_S, LockstepClock
 from .paced_clock import PacedClock
 from .tlog import TlogWriter
 from .types import (
@@ -217,10 +218,14 @@ class MavlinkVehicle:
     """A Vehicle over a MAVLink connection URL (udp://:14550, udpout://host:port, tcp://host:port,
     serial:///dev/ttyAMA0:921600), for ArduPilot Copter. `paced`: the vehicle is preland's simulator and
     runs in lock-step with this companion (PRELAND_PACE, see `paced_clock`); its clock is then a
-    `PacedClock`, and the ground truth comes with each held time."""
+    `PacedClock`, and the ground truth comes with each held time. `lockstep`: the vehicle is SITL on a
+    physics in this process that owns time, and this is its clock (`lockstep_clock`)."""
 
     def __init__(self, *, url: str, connect_timeout_s: float = 30.0, link_timeout_s: float = 5.0,
-                 want_truth: bool = False, tlog_path: str | None = None, paced: bool = False) -> None:
+                 want_truth: bool = False, tlog_path: str | None = None, paced: bool = False,
+                 lockstep: LockstepClock | None = None) -> None:
+        if paced and lockstep is not None:
+            raise ValueError("a vehicle is paced (PRELAND_PACE) or in lock-step with a local physics, not both")
         self.url = url
         self.tlog = TlogWriter(tlog_path) if tlog_path else None
         self.connect_timeout_s = connect_timeout_s
@@ -229,6 +234,10 @@ class MavlinkVehicle:
         self._clock = VehicleTimeClock()
         self.paced = paced
         self._paced_clock = PacedClock(grant=self._want_grant) if paced else None
+        self._lockstep = lockstep
+        self._received = 0  # messages taken in
+        if lockstep is not None:
+            lockstep.activity = self._activity
         self._pace_wanted_ms: int | None = None
         self._pace_changed = asyncio.Event()
         self._last_heartbeat_vehicle_s = 0.0
@@ -252,8 +261,10 @@ class MavlinkVehicle:
         self._commanded_mode: _Commanded | None = None
 
     @property
-    def clock(self) -> VehicleTimeClock | PacedClock:
-        """The vehicle's time: followed (`VehicleTimeClock`), or in lock-step (`PacedClock`)."""
+    def clock(self) -> VehicleTimeClock | PacedClock | LockstepClock:
+        """The vehicle's time: followed (`VehicleTimeClock`), or in lock-step (`PacedClock`, `LockstepClock`)."""
+        if self._lockstep is not None:
+            return self._lockstep
         return self._paced_clock if self._paced_clock is not None else self._clock
 
     @property
@@ -346,6 +357,7 @@ class MavlinkVehicle:
             except ValueError:
                 continue
             name = message.message_name
+            self._received += 1
             if self.tlog is not None:
                 self.tlog.write(name=name, fields=fields, system_id=message.system_id,
                                 component_id=message.component_id)
@@ -390,10 +402,12 @@ class MavlinkVehicle:
     def _check_link(self, operation: str) -> None:
         if self._closed or self._direct is None:
             raise VehicleError(operation=operation, reason="not connected")
-        if self._paced_clock is not None and self._paced_clock.started:
-            # In lock-step the vehicle's time passes only when this companion grants it, so silence is vehicle
-            # time; a simulator that stops answering at all is the paced clock's to find (a wall bound).
-            silent_vehicle_s = self._paced_clock.now_s() - self._last_heartbeat_vehicle_s
+        locked = self._lockstep or (self._paced_clock if self._paced_clock is not None and
+                                    self._paced_clock.started else None)
+        if locked is not None:
+            # In lock-step the vehicle's time passes only with the companion's leave, so silence is vehicle
+            # time; a vehicle that stops answering at all is the clock's to find (a wall bound).
+            silent_vehicle_s = locked.now_s() - self._last_heartbeat_vehicle_s
             if silent_vehicle_s > self.link_timeout_s:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
         elif self._last_heartbeat_wall is not None:
@@ -430,9 +444,27 @@ class MavlinkVehicle:
 
     # ---------------------------------------------------------------- sending
 
+    async def _poll_pause(self) -> None:
+        """Between two looks for an answer: in lock-step, one step of vehicle time (so the answer is seen at
+        the vehicle time it came, whatever the machine); else 10 wall ms."""
+        if self._lockstep is not None:
+            await self._lockstep.sleep(EXCHANGE_STEP_S)
+        else:
+            await asyncio.sleep(0.01)
+
+    def _activity(self) -> tuple[int, int]:
+        """How much has come in (messages, and MAVSDK calls still out), for a lock-step clock to wait until
+        nothing more does."""
+        return self._received, len(self._executor.running) if self._executor is not None else 0
+
     def _holding(self):
-        """In lock-step, the vehicle's time stands still during an exchange with it (as in virtual time)."""
+        """Paced, the vehicle's time stands still during an exchange with it (as in virtual time)."""
         return self._paced_clock.holding() if self._paced_clock is not None else contextlib.nullcontext()
+
+    def _exchanging(self):
+        """An exchange that waits for the vehicle's answer: paced, time stands still (the simulator answers
+        while it holds); in lock-step with SITL, time runs for it (SITL answers only as time passes)."""
+        return self._lockstep.exchanging() if self._lockstep is not None else self._holding()
 
     async def _send(self, name: str, fields: dict[str, Any], *, targeted: bool = True) -> None:
         with self._holding():
@@ -446,7 +478,7 @@ class MavlinkVehicle:
                                                        target_component_id=1, fields_json=json.dumps(payload)))
 
     async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> None:
-        with self._holding():
+        with self._exchanging():
             await self._command_now(command, *params, operation=operation, check=check)
 
     async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> None:
@@ -540,7 +572,7 @@ class MavlinkVehicle:
     async def _param_exchange(self, name: str, *, operation: str, send: dict[str, Any] | None) -> tuple[float, int]:
         """Send PARAM_SET (`send`) or PARAM_REQUEST_READ and wait for the PARAM_VALUE of `name` that answers it:
         (value, MAV_PARAM_TYPE). ArduPilot answers nothing for a name it lacks."""
-        with self._holding():
+        with self._exchanging():
             return await self._param_exchange_now(name, operation=operation, send=send)
 
     async def _param_exchange_now(self, name: str, *, operation: str,
@@ -557,7 +589,7 @@ class MavlinkVehicle:
                 answer = self._param_values.get(name)
                 if answer is not None and answer[2] > seen:
                     return answer[0], answer[1]
-                await asyncio.sleep(0.01)
+                await self._poll_pause()
         raise CommandDenied(operation=operation, reason=f"{name}: no PARAM_VALUE after {PARAM_TRIES} tries "
                                                         "(no such parameter?)")
 

@@ -1,0 +1,91 @@
+"""What SITL is told of preland's physics: ArduPilot SITL's `Aircraft::smooth_sensors`
+(libraries/SITL/SIM_Aircraft.cpp), for the same reason.
+
+The ground contact levels the vehicle and stops it within one step (SITL's GROUND_BEHAVIOR_NO_MOVEMENT,
+as `QuadXMultirotor` does). Told as it is, a touchdown in wind is a roll and pitch jump the gyro never saw
+and a velocity step the accelerometer never saw: ArduCopter's EKF then keeps the tilt the vehicle had
+into the wind for seconds, sees a horizontal acceleration that is not there, and LAND asks for a lean the
+grounded vehicle cannot make, so the land detector (its angle checks) never fires and the vehicle never
+disarms. SITL's own physics sends smoothed sensors instead, from boot (a SITL vehicle starts on the ground
+and `use_smoothing` is never cleared), and so does the bridge: a smoothed body follows the true one with
+a 0.1 s time constant; its gyro is the true rate plus the rotation to the true attitude over the time
+constant, its specific force the acceleration that brings its velocity and position to the true ones
+(limited to 14 g); the attitude sent stays the true one (fill_fdm sends the unsmoothed attitude).
+In flight the smoothed velocity stays within about 1 cm/s of the true one.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+
+from .multirotor import GRAVITY_M_S2, MultirotorState, rotation_body_to_ned
+
+TIME_CONSTANT_S = 0.1  # smooth_sensors' time_constant
+ACCEL_LIMIT_M_S2 = 14 * GRAVITY_M_S2  # smooth_sensors' limit on the smoothed body's acceleration
+_MAX_DT_S = 0.1  # smooth_sensors skips a step longer than this
+_RESET_DISTANCE_M = 10.0  # and starts again from the true state when it is this far from it
+
+
+def _multiply(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float, float]:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+class SensorSmoothing:
+    """`smoothed(state)`: the state SITL is told, for each new true state of the physics (in order)."""
+
+    def __init__(self) -> None:
+        self._time_s: float | None = None
+
+    def reset(self) -> None:
+        """Start again from the next state (the physics was reset)."""
+        self._time_s = None
+
+    def smoothed(self, state: MultirotorState) -> MultirotorState:
+        if self._time_s is None or math.dist(state.position_ned_m, self._p) > _RESET_DISTANCE_M:
+            self._time_s = state.time_s
+            self._p, self._v = list(state.position_ned_m), list(state.velocity_ned_m_s)
+            self._q = state.quaternion_wxyz
+            self._gyro, self._accel = state.gyro_frd_rad_s, state.accel_frd_m_s2
+            return state
+        dt_s = state.time_s - self._time_s
+        self._time_s = state.time_s
+        if 0.0 < dt_s <= _MAX_DT_S:
+            self._step(state, dt_s)
+        return replace(state, position_ned_m=tuple(self._p), velocity_ned_m_s=tuple(self._v),
+                       gyro_frd_rad_s=self._gyro, accel_frd_m_s2=self._accel)
+
+    def _step(self, state: MultirotorState, dt_s: float) -> None:
+        tc = TIME_CONSTANT_S
+        p, v, q = state.position_ned_m, state.velocity_ned_m_s, state.quaternion_wxyz
+        r = rotation_body_to_ned(*q)
+        f = state.accel_frd_m_s2
+        true_accel_ned = [r[i][0] * f[0] + r[i][1] * f[1] + r[i][2] * f[2] for i in range(3)]
+        true_accel_ned[2] += GRAVITY_M_S2
+        accel_ned = [min(max(((v[i] - self._v[i]) + (p[i] - self._p[i]) / tc) / tc + true_accel_ned[i],
+                             -ACCEL_LIMIT_M_S2), ACCEL_LIMIT_M_S2) for i in range(3)]
+        rs = rotation_body_to_ned(*self._q)
+        fn, fe, fd = accel_ned[0], accel_ned[1], accel_ned[2] - GRAVITY_M_S2
+        self._accel = tuple(rs[0][j] * fn + rs[1][j] * fe + rs[2][j] * fd for j in range(3))
+        # the body-frame rotation from the smoothed attitude to the true one (AP's Quaternion operator/)
+        sq = self._q
+        w, x, y, z = _multiply((sq[0], -sq[1], -sq[2], -sq[3]), q)
+        if w < 0:
+            w, x, y, z = -w, -x, -y, -z
+        sin_half = math.sqrt(x * x + y * y + z * z)
+        gain = 2.0 * math.atan2(sin_half, w) / (sin_half * tc) if sin_half > 1e-12 else 0.0
+        gyro = state.gyro_frd_rad_s
+        self._gyro = (gyro[0] + x * gain, gyro[1] + y * gain, gyro[2] + z * gain)
+        rate = math.sqrt(sum(g * g for g in self._gyro))
+        if rate * dt_s > 1e-12:
+            half = 0.5 * rate * dt_s
+            k = math.sin(half) / rate
+            nq = _multiply(sq, (math.cos(half), self._gyro[0] * k, self._gyro[1] * k, self._gyro[2] * k))
+            norm = math.sqrt(sum(c * c for c in nq))
+            self._q = tuple(c / norm for c in nq)
+        self._v = [self._v[i] + accel_ned[i] * dt_s for i in range(3)]
+        self._p = [self._p[i] + self._v[i] * dt_s for i in range(3)]  # as SITL: with the new velocity

@@ -1,0 +1,260 @@
+"""The vehicle clock of a physics that owns time (SITL on preland's physics): vehicle seconds are the
+physics' own, and a reading is made at its vehicle time however slow this machine is.
+
+SITL on its JSON interface waits for the physics after every servo packet, and the physics (the JSON
+bridge) runs in this process, so the companion can hold it (`sim.step_gate.StepGate`). The rules are the
+paced clock's (`paced_clock`) as far as SITL allows:
+
+- time is the physics' time, read from the gate; a sleep ends when the physics reaches its deadline
+  (the gate tells this clock from the physics thread);
+- the physics may step up to the earliest deadline of all sleepers and no further, once the callbacks
+  ready have run (tasks just woken go back to sleep first), so the companion acts at the vehicle times it
+  asked for, as on the embedded simulator;
+- tasks that read sensors join the clock (`join`): while one of them is awake (rendering a frame,
+  detecting, sending its LANDING_TARGET) the physics holds where it is. So a frame shows the vehicle at
+  the frame's time and its LANDING_TARGET is in SITL's socket before SITL's next step;
+- unlike the simulator's MAVLink face, SITL answers nothing while held: while a task waits for an answer
+  (a command and its COMMAND_ACK, a parameter: `exchanging`), time runs in EXCHANGE_STEP_S steps.
+
+Before the sleepers due at a hold wake, the companion takes in what SITL sent before it stopped there
+(`activity`, set by the vehicle: its count of messages received and calls returned; the sleepers wake once
+it has not changed for SETTLE_WALL_S), so what a task reads at a vehicle time does not depend on how fast
+this machine moved the messages along.
+
+A physics whose time stops while nothing holds it (SITL stopped or hung: it sends no servo packet) is
+found by a wall bound: LinkLost after `stall_wall_s`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import heapq
+import itertools
+import math
+import time
+from collections.abc import Callable
+
+from ..errors import LinkLost, WaitTimeout
+from ..sim.step_gate import REACHED_S, StepGate
+
+# Wall seconds without the physics' time moving, while nothing here holds it, before the link counts as
+# lost: far more than a loaded machine's stall, well inside a test's patience.
+PHYSICS_STALL_WALL_S = 10.0
+_CHECK_WALL_S = 1.0  # how often a sleeper looks whether the physics' time still moves (wall s)
+# The vehicle time at which a lock-step trial's mission begins: after SITL's boot and the companion's
+# connection (a few vehicle s), before ArduCopter can arm (about 40 s on the copter defaults, for its EKF
+# and GPS), so every trial begins at the same vehicle time however long the connection took in wall time.
+MISSION_START_S = 15.0
+# While a task waits for SITL's answer, time passes in steps of ArduCopter's main loop (400 Hz), so the
+# answer is seen within one loop of its sending (vehicle s).
+EXCHANGE_STEP_S = 0.0025
+# What SITL sent before a hold is taken in when nothing more has come for this long (wall s), within the
+# bound after it (wall s; a message later than that is read at a later vehicle time).
+SETTLE_WALL_S = 0.0005
+SETTLE_MAX_WALL_S = 0.05
+# An update waits at most this many passes of the event loop for the callbacks ready before it to run.
+_UPDATE_DEFERRALS = 64
+
+
+class LockstepClock:
+    """Vehicle seconds of the physics behind `gate`; see the module for the rules."""
+
+    def __init__(self, *, gate: StepGate, stall_wall_s: float = PHYSICS_STALL_WALL_S) -> None:
+        if stall_wall_s <= 0:
+            raise ValueError("stall_wall_s must be positive")
+        self._gate = gate
+        self.stall_wall_s = stall_wall_s
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._sleepers: list[tuple[float, int, asyncio.Future]] = []  # (deadline s, order, future): a heap
+        self._order = itertools.count()
+        self._participants: set[asyncio.Task] = set()
+        self._asleep: dict[asyncio.Task, float] = {}  # participant -> the deadline it sleeps to
+        self._exchanges = 0
+        self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
+        self._settling = False
+        self.unsettled = 0  # holds whose messages were still coming at SETTLE_MAX_WALL_S
+        self._update_scheduled = False
+        self._deferrals = 0
+        self._start_wall_s = time.monotonic()
+        self._start_s = gate.time_s
+        self.wakes = 0
+
+    # ---------------------------------------------------------------- the Clock protocol
+
+    def now_s(self) -> float:
+        return self._gate.time_s
+
+    async def sleep(self, duration_s: float) -> None:
+        if duration_s <= 0:
+            await asyncio.sleep(0)
+            return
+        loop = asyncio.get_running_loop()
+        self._loop = loop
+        deadline_s = self.now_s() + duration_s
+        future = loop.create_future()
+        heapq.heappush(self._sleepers, (deadline_s, next(self._order), future))
+        task = asyncio.current_task()
+        joined = task in self._participants
+        if joined:
+            self._asleep[task] = deadline_s
+        self._update()
+        try:
+            seen_s, seen_wall_s = self.now_s(), time.monotonic()
+            while not future.done():
+                await asyncio.wait([future], timeout=_CHECK_WALL_S)
+                now_s = self.now_s()
+                if future.done():
+                    break
+                if now_s != seen_s:
+                    seen_s, seen_wall_s = now_s, time.monotonic()
+                elif time.monotonic() - seen_wall_s > self.stall_wall_s:
+                    self._stalled(time.monotonic() - seen_wall_s)
+        finally:
+            if not future.done():
+                future.cancel()  # stays in the heap, skipped
+            if joined:
+                self._asleep.pop(task, None)
+            self._update()
+
+    async def start_at(self, time_s: float = MISSION_START_S) -> float:
+        """Sleep until vehicle time `time_s` (the mission begins there); returns the time it was called at,
+        later than `time_s` when the connection took longer (the trial then begins where it is)."""
+        called_s = self.now_s()
+        if called_s < time_s:
+            await self.sleep(time_s - called_s)
+        return called_s
+
+    @property
+    def rate(self) -> float:
+        """Vehicle seconds per wall second since the start (how fast the two ran together)."""
+        wall_s = time.monotonic() - self._start_wall_s
+        return (self.now_s() - self._start_s) / wall_s if wall_s > 0 else 0.0
+
+    # ---------------------------------------------------------------- who holds time
+
+    def join(self) -> None:
+        """The running task reads sensors: while it is awake, the physics holds."""
+        task = asyncio.current_task()
+        if task is None or task in self._participants:
+            return
+        self._loop = asyncio.get_running_loop()
+        self._participants.add(task)
+        task.add_done_callback(self._leave)
+        self._update()
+
+    def _leave(self, task: asyncio.Task) -> None:
+        self._participants.discard(task)
+        self._asleep.pop(task, None)
+        self._update()
+
+    @contextlib.contextmanager
+    def holding(self):
+        """An exchange that needs no answer (a LANDING_TARGET sent): the physics keeps holding for it."""
+        yield
+
+    @contextlib.contextmanager
+    def exchanging(self):
+        """The running task waits for the vehicle's answer, which SITL gives only while time passes: time
+        runs in EXCHANGE_STEP_S steps meanwhile, and a sensor task that waits holds none."""
+        task = asyncio.current_task()
+        marked = task in self._participants and task not in self._asleep
+        if marked:
+            self._asleep[task] = math.inf
+        self._exchanges += 1
+        self._update()
+        try:
+            yield
+        finally:
+            self._exchanges -= 1
+            if marked:
+                self._asleep.pop(task, None)
+            self._update()
+
+    def _holders(self) -> list[str]:
+        return sorted(task.get_name() for task in self._participants if task not in self._asleep)
+
+    def _update(self) -> None:
+        # After the callbacks already ready (the tasks just woken) have run and gone back to sleep, so the
+        # hold is the earliest of all their new deadlines.
+        if not self._update_scheduled and self._loop is not None:
+            self._update_scheduled = True
+            self._loop.call_soon(self._apply)
+
+    def _apply(self) -> None:
+        loop = self._loop
+        if getattr(loop, "_ready", None) and self._deferrals < _UPDATE_DEFERRALS:
+            self._deferrals += 1  # other callbacks first: a task just woken or created may sleep sooner
+            loop.call_soon(self._apply)
+            return
+        self._update_scheduled = False
+        self._deferrals = 0
+        if self._settling:
+            return  # the hold stays until the messages are in and the sleepers due are woken
+        while self._sleepers and self._sleepers[0][2].done():
+            heapq.heappop(self._sleepers)
+        now_s = self.now_s()
+        wake_s = self._sleepers[0][0] if self._sleepers else math.inf
+        if self._holders():
+            hold_s = now_s  # a reading is being made: the vehicle waits for it
+        elif self._exchanges:
+            hold_s = wake_s = min(wake_s, now_s + EXCHANGE_STEP_S)  # told there, to step on
+        else:
+            hold_s = None if math.isinf(wake_s) else wake_s
+        self._gate.hold_at(hold_s)
+        if not math.isinf(wake_s):
+            self._gate.wake_at(wake_s, self._woken)
+
+    # ---------------------------------------------------------------- waking
+
+    def _woken(self, _time_s: float) -> None:
+        """From the physics' thread (or this one): its time reached the earliest deadline."""
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            return
+        try:
+            loop.call_soon_threadsafe(self._wake_due)
+        except RuntimeError:  # the loop closed meanwhile: the trial is over
+            pass
+
+    def _wake_due(self) -> None:
+        if self.activity is not None:
+            if not self._settling:
+                self._settling = True
+                asyncio.ensure_future(self._settle_then_wake())
+            return
+        self._wake_sleepers()
+
+    async def _settle_then_wake(self) -> None:
+        try:
+            deadline_wall_s = time.monotonic() + SETTLE_MAX_WALL_S
+            seen = self.activity()
+            while True:
+                await asyncio.sleep(SETTLE_WALL_S)
+                now = self.activity()
+                if now == seen:
+                    break
+                seen = now
+                if time.monotonic() > deadline_wall_s:
+                    self.unsettled += 1
+                    break
+        finally:
+            self._settling = False
+            self._wake_sleepers()
+
+    def _wake_sleepers(self) -> None:
+        now_s = self.now_s()
+        while self._sleepers and self._sleepers[0][0] <= now_s + REACHED_S:
+            _, _, future = heapq.heappop(self._sleepers)
+            if not future.done():
+                future.set_result(None)
+                self.wakes += 1
+        self._update()
+
+    def _stalled(self, silent_wall_s: float) -> None:
+        holders = self._holders()
+        if holders:
+            raise WaitTimeout(operation="lock-step clock: time to pass", timeout_s=round(silent_wall_s, 1),
+                              last_state=f"sensor tasks {', '.join(holders)} hold the vehicle's time")
+        raise LinkLost(operation="lock-step physics", reason=f"SITL sent no servo packet for "
+                                                             f"{silent_wall_s:.0f} wall s")
