@@ -37,6 +37,7 @@ from collections.abc import Callable
 
 from ..errors import LinkLost, WaitTimeout
 from ..sim.step_gate import REACHED_S, StepGate
+from .after_ready import AfterReady
 
 # Wall seconds without the physics' time moving, while nothing here holds it, before the link counts as
 # lost: far more than a loaded machine's stall, well inside a test's patience.
@@ -53,8 +54,6 @@ EXCHANGE_STEP_S = 0.0025
 # bound after it (wall s; a message later than that is read at a later vehicle time).
 SETTLE_WALL_S = 0.0005
 SETTLE_MAX_WALL_S = 0.05
-# An update waits at most this many passes of the event loop for the callbacks ready before it to run.
-_UPDATE_DEFERRALS = 64
 
 
 class LockstepClock:
@@ -74,8 +73,7 @@ class LockstepClock:
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
         self._settling = False
         self.unsettled = 0  # holds whose messages were still coming at SETTLE_MAX_WALL_S
-        self._update_scheduled = False
-        self._deferrals = 0
+        self._after_ready = AfterReady(self._apply)
         self._start_wall_s = time.monotonic()
         self._start_s = gate.time_s
         self.wakes = 0
@@ -177,18 +175,10 @@ class LockstepClock:
     def _update(self) -> None:
         # After the callbacks already ready (the tasks just woken) have run and gone back to sleep, so the
         # hold is the earliest of all their new deadlines.
-        if not self._update_scheduled and self._loop is not None:
-            self._update_scheduled = True
-            self._loop.call_soon(self._apply)
+        if self._loop is not None:
+            self._after_ready.schedule(self._loop)
 
     def _apply(self) -> None:
-        loop = self._loop
-        if getattr(loop, "_ready", None) and self._deferrals < _UPDATE_DEFERRALS:
-            self._deferrals += 1  # other callbacks first: a task just woken or created may sleep sooner
-            loop.call_soon(self._apply)
-            return
-        self._update_scheduled = False
-        self._deferrals = 0
         if self._settling:
             return  # the hold stays until the messages are in and the sleepers due are woken
         while self._sleepers and self._sleepers[0][2].done():

@@ -31,12 +31,11 @@ import time
 from collections.abc import Callable
 
 from ..errors import LinkLost, WaitTimeout
+from .after_ready import AfterReady
 
 # Wall seconds without the simulator answering a grant (a held time) before the link counts as lost: far
 # more than a loaded machine's stall, far less than a test's patience.
 PACE_ANSWER_WALL_S = 20.0
-# A grant waits at most this many passes of the event loop for the callbacks ready before it to run.
-_REGRANT_DEFERRALS = 64
 # A deadline is reached when the held time is within this of it (time_boot_ms is whole milliseconds).
 _REACHED_S = 0.0005
 
@@ -55,8 +54,7 @@ class PacedClock:
         self._participants: set[asyncio.Task] = set()
         self._sleeping: dict[asyncio.Task, int] = {}  # participant -> sleeps it is in
         self._granted_ms = 0
-        self._regrant_scheduled = False
-        self._deferrals = 0
+        self._after_ready = AfterReady(self._regrant)
         self._holds = 0
         self._answered_wall_s = time.monotonic()
         self.grants = 0
@@ -179,18 +177,9 @@ class PacedClock:
     def _schedule_regrant(self) -> None:
         # After the callbacks already ready (the tasks just woken) have run and gone back to sleep, so the
         # grant is the earliest of all their new deadlines.
-        if not self._regrant_scheduled:
-            self._regrant_scheduled = True
-            asyncio.get_running_loop().call_soon(self._regrant)
+        self._after_ready.schedule()
 
     def _regrant(self) -> None:
-        loop = asyncio.get_running_loop()
-        if getattr(loop, "_ready", None) and self._deferrals < _REGRANT_DEFERRALS:
-            self._deferrals += 1  # other callbacks first: a task just woken or created may sleep sooner
-            loop.call_soon(self._regrant)
-            return
-        self._regrant_scheduled = False
-        self._deferrals = 0
         if not self._started or self._holds:
             return
         while self._sleepers and self._sleepers[0][2].done():
