@@ -43,6 +43,13 @@ RESEND_S = 1.0  # SIM_JSON::recv_fdm resends the servos after 1 wall s without a
 ANSWER_TIMEOUT_S = 5.0  # wall s without an answer before the stand-in gives up (SITL would wait for ever)
 
 
+def _write_whole(path: Path, text: str) -> None:
+    """Write `text` to `path` by a rename, so a test polling the file never reads it empty or half written."""
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(text)
+    os.replace(partial, path)
+
+
 def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | None) -> None:
     """SITL's side of the JSON interface, in lock-step: send a servo packet, wait for its answer, next frame."""
     pwm = [round(QuadXFrame().hover_pwm_us()) - 50] * 4 + [0] * 12
@@ -68,9 +75,7 @@ def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | N
                     sock.sendto(packet, (host, port))  # the same frame_count again, as SITL resends
             answers += 1
             if answers_file is not None and (answers == 1 or sent_at - noted_at > 0.2):
-                partial = answers_file.with_suffix(".partial")  # replaced whole: a reader never sees half
-                partial.write_text(f"{answers}\n")
-                os.replace(partial, answers_file)
+                _write_whole(answers_file, f"{answers}\n")
                 noted_at = sent_at
             # at the frame rate, without a burst to catch up after a stall (a loaded machine, a long wait)
             next_at = max(next_at + frame_wall_s, time.monotonic() - frame_wall_s)
@@ -115,7 +120,7 @@ def main() -> None:
     args = parser.parse_args()
     log_dir = os.environ.get("FAKE_SITL_LOG_DIR")
     if log_dir:
-        Path(log_dir, f"{os.getpid()}.json").write_text(json.dumps({"pid": os.getpid(), "argv": sys.argv[1:]}))
+        _write_whole(Path(log_dir, f"{os.getpid()}.json"), json.dumps({"pid": os.getpid(), "argv": sys.argv[1:]}))
     # ArduPilot reads every defaults file, later ones winning; the simulator models only some parameters,
     # the others (compass offsets, RC calibration, SIM_*) are taken and ignored, as SITL would use them.
     given = {}
@@ -140,7 +145,7 @@ def main() -> None:
         def step_and_note() -> None:
             step()
             if not airborne.exists() and simulator.autopilot.landed_state().name == "IN_AIR":
-                airborne.write_text(f"{simulator.time_s:.2f}\n")
+                _write_whole(airborne, f"{simulator.time_s:.2f}\n")
 
         simulator.step = step_and_note
     if args.model and args.model.startswith("JSON"):
