@@ -21,9 +21,10 @@ campaign: $(STAMP)
 fly: $(STAMP)
 	$(VENV)/bin/preland fly missions/thesis_square_land.yaml
 
-# Each test module on one worker (--dist loadfile): the Ray tests then share one local Ray instance.
+# Each test module on one worker (--dist loadfile): the Ray tests then share one local Ray instance. The
+# modules go out in collection order (--no-loadscope-reorder), which puts the longest first (tests/conftest.py).
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -n 4 --dist loadfile
+	$(VENV)/bin/python -m pytest -q -n 4 --dist loadfile --no-loadscope-reorder
 
 # Builds the docs site into site/ (strict: a broken link or a missing page fails).
 # The two variables silence the notices MkDocs plugins print about MkDocs 2 (see docs/contributing.md).

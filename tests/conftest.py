@@ -28,3 +28,18 @@ def thesis_mission() -> MissionSpec:
 def square_trial(thesis_mission):
     """One normal-mode trial of the thesis mission, with its trajectory."""
     return run_trial(TrialRequest(mission=thesis_mission, seed=7))
+
+
+# The longest test files (by `pytest --durations=0`, summed per file), first. `make test` gives each xdist
+# worker whole files (--dist loadfile, --no-loadscope-reorder: in collection order, not by test count), so a
+# long file collected late runs alone at the end while the other workers idle. xdist starts each of the 4
+# workers on two files, the first four and the next four in turn: the longest is paired with the shortest of
+# those. Any file not named keeps its place after these.
+LONGEST_FIRST = ("test_campaign_ray.py", "test_docs_tutorials.py", "test_mavlink_camera.py", "test_docs_site.py",
+                 "test_sitl.py", "test_runtimes.py", "test_mavlink_runtime.py", "test_sitl_failures.py",
+                 "test_roi_render.py", "test_campaign.py", "test_calibrate.py", "test_field_ops.py")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {name: index for index, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: a file's tests keep their order

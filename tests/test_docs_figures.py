@@ -182,6 +182,18 @@ def test_report_figures_map_to_their_site_names_on_a_small_campaign(modules, tmp
         check_png(path)
 
 
+def test_a_preview_build_runs_the_report_campaign_with_the_trials_it_names(modules, monkeypatch):
+    report = modules["report"]
+    monkeypatch.delenv(report.PREVIEW_TRIALS_ENV, raising=False)
+    assert report.preview_trials() is None  # the published site: the campaign's own trials
+    monkeypatch.setenv(report.PREVIEW_TRIALS_ENV, "2")
+    assert report.preview_trials() == 2
+    for bad in ("0", "two", "-1"):
+        monkeypatch.setenv(report.PREVIEW_TRIALS_ENV, bad)
+        with pytest.raises(ValueError, match="PRELAND_DOCS_TRIALS"):
+            report.preview_trials()
+
+
 def test_publish_copies_each_figure_into_the_site_once(build, tmp_path):
     written = {}
 

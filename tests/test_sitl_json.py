@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import socket
+import time
 import struct
 
 import pytest
@@ -191,6 +192,28 @@ def test_the_bridge_answers_1000_steps_in_lock_step():
         sitl.close()
         bridge.stop()
     assert not bridge.running
+
+
+def test_the_bridge_accounts_for_its_wall_time_between_physics_sitl_and_holds():
+    bridge = JsonBridge(model=QuadXMultirotor(), port=0, packet_timeout_s=10.0).start()
+    sitl = StandInSitl(bridge.address)
+    try:
+        started = time.perf_counter()
+        sitl.exchange(0, [1000] * 16)
+        slow_sitl_s = 0.05
+        deadline = time.perf_counter() + slow_sitl_s  # SITL's own step, slow: the bridge is waiting for it
+        while time.perf_counter() < deadline:
+            pass
+        for frame in range(1, 200):
+            sitl.exchange(frame, [1000] * 16)
+        elapsed_s = time.perf_counter() - started
+        counters = bridge.counters
+        assert counters.physics_wall_s > 0 and counters.held_wall_s == 0.0  # nothing held it
+        assert counters.waiting_wall_s >= slow_sitl_s
+        assert counters.physics_wall_s + counters.waiting_wall_s <= elapsed_s + 0.5  # the bridge started first
+    finally:
+        sitl.close()
+        bridge.stop()
 
 
 def test_the_bridge_gives_up_after_its_bounded_wait():

@@ -7,6 +7,8 @@ temporary store, and the report writer draws its figures from it; nothing is dra
 
 from __future__ import annotations
 
+import dataclasses
+import os
 import shutil
 import sys
 import tempfile
@@ -21,6 +23,19 @@ from preland_app.api import load_campaign, run_campaign, write_campaign_report  
 CAMPAIGN = _figkit.ROOT / "campaigns" / "thesis_table3.yaml"
 WORKERS = 1  # one core: the test suite builds the docs beside its real-time MAVLink tests
 KINDS = ("errors", "positions", "trajectory")  # the report writer's figures, as `CAMPAIGN_KIND.png`
+# A preview build (`PRELAND_DOCS_TRIALS=2 mkdocs serve`, and the test suite's build) runs the campaign with this
+# many trials a scenario instead of its own: the same figures, drawn from fewer trials, in a few seconds.
+PREVIEW_TRIALS_ENV = "PRELAND_DOCS_TRIALS"
+
+
+def preview_trials() -> int | None:
+    """Trials a scenario for a preview build ($PRELAND_DOCS_TRIALS), or None for the campaign's own."""
+    text = os.environ.get(PREVIEW_TRIALS_ENV, "").strip()
+    if not text:
+        return None
+    if not text.isdigit() or int(text) < 1:
+        raise ValueError(f"{PREVIEW_TRIALS_ENV}: must be a whole number of trials >= 1, got {text!r}")
+    return int(text)
 
 
 def site_name(path: Path, campaign: str) -> str | None:
@@ -31,12 +46,20 @@ def site_name(path: Path, campaign: str) -> str | None:
     return f"report-{path.stem[len(prefix):]}.png"
 
 
-def make(out_dir: Path, campaign_file: Path = CAMPAIGN, workers: int = WORKERS) -> list[Path]:
-    name = load_campaign(campaign_file).name
+def make(out_dir: Path, campaign_file: Path = CAMPAIGN, workers: int = WORKERS,
+         trials: int | None = None) -> list[Path]:
+    """The report's figures of `campaign_file`, each scenario with `trials` trials (default: the campaign's
+    own, or $PRELAND_DOCS_TRIALS in a preview build)."""
+    campaign = load_campaign(campaign_file)
+    name = campaign.name
+    trials = trials if trials is not None else preview_trials()
+    if trials is not None:
+        campaign = dataclasses.replace(campaign, trials=trials, scenarios=tuple(
+            dataclasses.replace(scenario, trials=None) for scenario in campaign.scenarios))
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as folder:
         db = Path(folder) / "results.db"
-        run_campaign(campaign_file, db=db, workers=workers)
+        run_campaign(campaign, db=db, workers=workers)
         written = write_campaign_report(db, name, Path(folder) / "report", figure_format="png", dpi=_figkit.DPI)
         published = []
         for path in written:

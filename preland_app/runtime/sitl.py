@@ -517,6 +517,9 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
         outcome.details["sitl_json_packets"] = counters.packets
         outcome.details["lockstep_holds"] = counters.holds
         outcome.details["lockstep_held_wall_s"] = round(counters.held_wall_s, 2)
+        outcome.details["bridge_physics_wall_s"] = round(counters.physics_wall_s, 2)
+        outcome.details["bridge_waiting_wall_s"] = round(counters.waiting_wall_s, 2)
+        outcome.details["bridge_vehicle_s"] = round(sitl.bridge.latest_state.time_s, 2)  # from SITL's boot
     outcome.details["sitl_gps_error_cm"] = [round(v * 100.0, 1) for v in gps.error_ned_m]
     return outcome
 

@@ -47,7 +47,10 @@ class JsonBridgeTimeout(PrelandError):
 
 @dataclass(frozen=True, kw_only=True)
 class BridgeCounters:
-    """What the bridge has done: packets received, steps taken, repeats answered, resets, bad packets."""
+    """What the bridge has done: packets received, steps taken, repeats answered, resets, bad packets; and
+    where its wall time went: stepping the model and writing the replies (`physics_wall_s`), waiting for
+    SITL's next packet (`waiting_wall_s`: SITL's own step and the transport), and held for the companion
+    (`held_wall_s`: its readings, camera frames and the settle before a wake)."""
 
     packets: int
     steps: int
@@ -59,6 +62,8 @@ class BridgeCounters:
     holds: int
     held_wall_s: float
     resends_dropped: int
+    physics_wall_s: float
+    waiting_wall_s: float
 
 
 class JsonBridge:
@@ -92,6 +97,7 @@ class JsonBridge:
         self._packets = self._steps = self._repeats = self._resets = self._skipped = self._bad = 0
         self._latest: MultirotorState = model.state
         self._dropped = 0
+        self._physics_wall_s = self._waiting_wall_s = 0.0
         self._pending: tuple[bytes, object] | None = None  # a datagram read while dropping resends
         self.gate = StepGate()
         self._smoothing = SensorSmoothing()  # what SITL is told, as SITL's own physics tells it
@@ -143,6 +149,7 @@ class JsonBridge:
         """Answer packets until `stop()`, `max_packets` packets, or JsonBridgeTimeout."""
         served = 0
         deadline = time.monotonic() + self.packet_timeout_s  # wall time bounds the wait only
+        waiting_since = time.perf_counter()
         while not self._stop.is_set() and (max_packets is None or served < max_packets):
             try:
                 if self._pending is not None:
@@ -158,7 +165,11 @@ class JsonBridge:
                     return  # socket closed by stop()
                 raise
             deadline = time.monotonic() + self.packet_timeout_s
+            received_at = time.perf_counter()
+            with self._lock:
+                self._waiting_wall_s += received_at - waiting_since
             reply = self.handle(data)
+            waiting_since = time.perf_counter()  # before the answer leaves: SITL's step starts with it
             if reply is not None:
                 self._drop_resends()
                 self._sock.sendto(reply, sender)
@@ -211,6 +222,7 @@ class JsonBridge:
         if last is not None and packet.frame_count < last:
             self.gate.reset()
         self.gate.wait_to_step(stop=self._stop)  # held for a reading at this time: SITL waits with us
+        stepping_at = time.perf_counter()
         with self._lock:
             wind = None if self.air is None else self.air.step(
                 dt_s=packet.dt_s, height_m=self.model.height_above_ground_m,
@@ -223,6 +235,7 @@ class JsonBridge:
                                            battery_voltage_v=self._battery_voltage_v, wind_ned_m_s=wind).encode()
             self._latest = state
             reply = self._last_reply
+            self._physics_wall_s += time.perf_counter() - stepping_at
         self.gate.stepped(state.time_s)
         return reply
 
@@ -240,4 +253,5 @@ class JsonBridge:
             return BridgeCounters(packets=self._packets, steps=self._steps, repeats=self._repeats,
                                   resets=self._resets, frames_skipped=self._skipped, bad_packets=self._bad,
                                   last_frame_count=self._last_frame, holds=self.gate.holds,
-                                  held_wall_s=self.gate.held_wall_s, resends_dropped=self._dropped)
+                                  held_wall_s=self.gate.held_wall_s, resends_dropped=self._dropped,
+                                  physics_wall_s=self._physics_wall_s, waiting_wall_s=self._waiting_wall_s)
