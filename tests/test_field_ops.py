@@ -217,6 +217,7 @@ class _SteppedClock:
 
     def __init__(self) -> None:
         self.time_s = 100.0
+        self.newest_s = None  # no stamped message read
 
     def now_s(self) -> float:
         return self.time_s
@@ -275,14 +276,15 @@ def test_a_heartbeat_sent_before_a_mode_change_but_read_after_its_ack_is_no_take
         heartbeat(FlightMode.STABILIZE, False, after_s=GuardedVehicle.CONFIRM_S)
 
 
-def test_a_stall_of_the_companion_shorter_than_half_a_wall_second_is_not_a_lost_link(monkeypatch):
-    """At 40x, 5 vehicle s of heartbeat silence is 0.125 wall s: a stall of preland's own process that long
-    is no lost link; a silence of more than LINK_LOST_MIN_WALL_S (and 5 vehicle s) is."""
+def test_a_stall_shorter_than_two_wall_seconds_is_not_a_lost_link(monkeypatch):
+    """At 40x, 5 vehicle s of heartbeat silence is 0.125 wall s: a stall of either process that long (or up to
+    LINK_LOST_MIN_WALL_S) is no lost link; a silence of more than LINK_LOST_MIN_WALL_S (and 5 vehicle s) is."""
     import time
 
     from preland_app.errors import LinkLost
     from preland_app.vehicle.mavlink_backend import LINK_LOST_MIN_WALL_S, MavlinkVehicle
 
+    assert LINK_LOST_MIN_WALL_S == 2.0
     vehicle = MavlinkVehicle(url="udp://:14550", link_timeout_s=5.0)
     clock = _SteppedClock()
     clock.rate = 40.0
@@ -290,13 +292,41 @@ def test_a_stall_of_the_companion_shorter_than_half_a_wall_second_is_not_a_lost_
     vehicle._direct = _OneMessage("HEARTBEAT", {})
     now = time.monotonic()
     monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now)
-    vehicle._last_heartbeat_wall = now - 0.4  # 16 vehicle s at 40x, 0.4 wall s
+    vehicle._last_heartbeat_wall = now - 1.9  # 76 vehicle s at 40x, 1.9 wall s: a stall
     vehicle._check_link("telemetry")
-    vehicle._last_heartbeat_wall = now - (LINK_LOST_MIN_WALL_S + 0.1)
-    with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 24.0 vehicle s"):
+    vehicle._last_heartbeat_wall = now - 2.1
+    with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 84.0 vehicle s"):
         vehicle._check_link("telemetry")
-    clock.rate = 10.0  # up to 10x the vehicle seconds alone decide: 0.6 wall s is 6 vehicle s, lost
-    with pytest.raises(LinkLost, match="no heartbeat for 6.0 vehicle s"):
+    clock.rate = 2.5  # up to 2.5x the vehicle seconds alone decide: 2.1 wall s is 5.25 vehicle s (5.3), lost
+    with pytest.raises(LinkLost, match="no heartbeat for 5.3 vehicle s"):
         vehicle._check_link("telemetry")
-    clock.rate = 1.0  # at 1x, 0.6 s of silence is within 5
+    clock.rate = 1.0  # at 1x, 2.1 s of silence is within 5
     vehicle._check_link("telemetry")
+    vehicle._last_heartbeat_wall = now - 5.1
+    with pytest.raises(LinkLost, match="no heartbeat for 5.1 vehicle s"):
+        vehicle._check_link("telemetry")
+
+
+def test_a_vehicle_that_talks_without_heartbeats_has_lost_its_link_by_its_own_stamps(monkeypatch):
+    """Heartbeats stop while stamped messages keep coming: lost after 5 vehicle s by the vehicle's stamps,
+    within the 2 wall s that a wholly quiet link is given."""
+    import time
+
+    from preland_app.errors import LinkLost
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
+
+    vehicle = MavlinkVehicle(url="udp://:14550", link_timeout_s=5.0)
+    clock = _SteppedClock()
+    clock.rate = 8.0
+    vehicle._clock = clock
+    vehicle._direct = _OneMessage("HEARTBEAT", {})
+    now = time.monotonic()
+    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now)
+    vehicle._last_heartbeat_wall = now - 0.7  # 5.6 vehicle s at 8x, but only 0.7 wall s
+    vehicle._last_message_wall = now
+    vehicle._heartbeat_stamp_s = 100.0
+    clock.newest_s = 104.9  # the vehicle has counted 4.9 s since its last heartbeat: not yet
+    vehicle._check_link("telemetry")
+    clock.newest_s = 105.2
+    with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 5.2 vehicle s"):
+        vehicle._check_link("telemetry")

@@ -194,6 +194,31 @@ def test_the_bridge_answers_1000_steps_in_lock_step():
     assert not bridge.running
 
 
+def test_resends_sitl_made_while_the_bridge_was_held_are_dropped_and_answered_once():
+    from .waiting import until
+
+    bridge = JsonBridge(model=QuadXMultirotor(), port=0, packet_timeout_s=10.0).start()
+    sitl = StandInSitl(bridge.address)
+    try:
+        pwm = [1000] * 16
+        sitl.exchange(0, pwm)
+        bridge.gate.hold_at(bridge.gate.time_s)  # a reading is being made at this time: frame 1 waits
+        packet = build_servo_packet(frame_rate_hz=RATE_HZ, frame_count=1, pwm_us=pwm)
+        for _ in range(3):  # frame 1, then two resends (SITL resends after 1 s without an answer)
+            sitl.sock.sendto(packet, bridge.address)
+        until(lambda: bridge.counters.packets == 2, timeout_s=10.0, what="the bridge to read frame 1")
+        bridge.gate.hold_at(None)
+        first = json.loads(sitl.sock.recvfrom(65000)[0].decode())
+        assert first["timestamp"] == pytest.approx(2 * DT_S, abs=1e-9)
+        following = sitl.exchange(2, pwm)  # the next answer is frame 2's: no stale frame-1 answer between
+        assert following["timestamp"] == pytest.approx(3 * DT_S, abs=1e-9)
+        counters = bridge.counters
+        assert counters.resends_dropped == 2 and counters.steps == 3 and counters.repeats == 0
+    finally:
+        sitl.close()
+        bridge.stop()
+
+
 def test_the_bridge_accounts_for_its_wall_time_between_physics_sitl_and_holds():
     bridge = JsonBridge(model=QuadXMultirotor(), port=0, packet_timeout_s=10.0).start()
     sitl = StandInSitl(bridge.address)

@@ -20,6 +20,7 @@ stays the model's true state.
 
 from __future__ import annotations
 
+import select
 import socket
 import threading
 import time
@@ -88,6 +89,8 @@ class JsonBridge:
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self._sock.bind((host, port))
         self._sock.settimeout(_POLL_S)
+        self._readable = select.poll()
+        self._readable.register(self._sock, select.POLLIN)
         self.address = self._sock.getsockname()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -177,18 +180,8 @@ class JsonBridge:
 
     def _drop_resends(self) -> None:
         """Drop the resends of the frame about to be answered already waiting; keep anything else."""
-        self._sock.settimeout(0.0)  # a timeout would make even MSG_DONTWAIT wait for it
-        try:
-            self._drop_waiting_resends()
-        finally:
-            self._sock.settimeout(_POLL_S)
-
-    def _drop_waiting_resends(self) -> None:
-        while True:
-            try:
-                data, sender = self._sock.recvfrom(_MAX_PACKET_BYTES)
-            except (BlockingIOError, InterruptedError):
-                return
+        while self._readable.poll(0):  # only what is there now: no wait, no exception per answer
+            data, sender = self._sock.recvfrom(_MAX_PACKET_BYTES)
             try:
                 repeat = parse_servo_packet(data).frame_count == self._last_frame
             except SitlJsonError:

@@ -73,6 +73,8 @@ class LockstepClock:
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
         self._settling = False
         self.unsettled = 0  # holds whose messages were still coming at SETTLE_MAX_WALL_S
+        self.settles = 0
+        self.settle_wall_s = 0.0  # wall s spent waiting for SITL's messages before wakes
         self._after_ready = AfterReady(self._apply)
         self._start_wall_s = time.monotonic()
         self._start_s = gate.time_s
@@ -216,8 +218,9 @@ class LockstepClock:
         self._wake_sleepers()
 
     async def _settle_then_wake(self) -> None:
+        started_wall_s = time.monotonic()
         try:
-            deadline_wall_s = time.monotonic() + SETTLE_MAX_WALL_S
+            deadline_wall_s = started_wall_s + SETTLE_MAX_WALL_S
             seen = self.activity()
             while True:
                 await asyncio.sleep(SETTLE_WALL_S)
@@ -230,6 +233,8 @@ class LockstepClock:
                     break
         finally:
             self._settling = False
+            self.settles += 1
+            self.settle_wall_s += time.monotonic() - started_wall_s
             self._wake_sleepers()
 
     def _wake_sleepers(self) -> None:

@@ -69,11 +69,12 @@ STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 
 # state stands until a HEARTBEAT reports it, or for this many vehicle seconds after the ACK (heartbeats come
 # at 1 to 10 Hz, so any later one was sent after the change and is believed).
 COMMANDED_STATE_GRACE_S = 2.0
-# Heartbeat silence is vehicle time reckoned from wall time (there is no message to stamp it), so at 40x the
-# 5 vehicle s of link_timeout_s would be 0.125 wall s, and a stall of preland's own process (a loaded
-# machine, a garbage collection) would read as a lost link. The link is lost only after this much wall time too
-# (half a second: up to 10x, SITL's default speed-up, the 5 vehicle s alone decide).
-LINK_LOST_MIN_WALL_S = 0.5
+# A vehicle that sends nothing at all (no stamped message either) has its silence reckoned from wall time,
+# so at 8x the 5 vehicle s of link_timeout_s would be 0.6 wall s, and a stall of either process (a loaded
+# machine, a garbage collection; 0.64 wall s was seen with the stand-in SITL at 8x on 2 cores running 4 test
+# workers) would read as a lost link. Such a link is lost only after this much wall time of quiet too (up
+# to 2.5x the 5 vehicle s alone decide; a SITL that has stopped is still found within 2 wall s).
+LINK_LOST_MIN_WALL_S = 2.0
 # Ground truth for the simulated sensors: each of their readings needs a SIM_STATE of its own, and the
 # IR-LOCK reads at 50 Hz.
 SIM_STATE_HZ = 50
@@ -115,6 +116,11 @@ class VehicleTimeClock:
     @property
     def ready(self) -> bool:
         return bool(self._samples)
+
+    @property
+    def newest_s(self) -> float | None:
+        """The newest vehicle time read (s), or None before the first."""
+        return self._samples[-1][1] if self._samples else None
 
     @property
     def settled(self) -> bool:
@@ -246,6 +252,8 @@ class MavlinkVehicle:
         self._sim_state_fresh = False
         self._status_texts: list[str] = []
         self._last_heartbeat_wall: float | None = None
+        self._heartbeat_stamp_s: float | None = None  # the newest vehicle time read when a heartbeat came
+        self._last_message_wall: float | None = None  # any message of the vehicle's
         self._sdk = None
         self._direct = None
         self._executor: DaemonCallExecutor | None = None
@@ -364,8 +372,10 @@ class MavlinkVehicle:
             if message.system_id != self.system_id:
                 continue
             self._messages[name] = fields
+            self._last_message_wall = time.monotonic()
             if name == "HEARTBEAT":
-                self._last_heartbeat_wall = time.monotonic()
+                self._last_heartbeat_wall = self._last_message_wall
+                self._heartbeat_stamp_s = self._clock.newest_s
                 self._last_heartbeat_vehicle_s = self.clock.now_s()
                 self._heartbeat_confirms(fields)
             elif name == "PARAM_VALUE":
@@ -411,9 +421,18 @@ class MavlinkVehicle:
             if silent_vehicle_s > self.link_timeout_s:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
         elif self._last_heartbeat_wall is not None:
-            silent_wall_s = time.monotonic() - self._last_heartbeat_wall
-            silent_vehicle_s = silent_wall_s * self._clock.rate
-            if silent_vehicle_s > self.link_timeout_s and silent_wall_s > LINK_LOST_MIN_WALL_S:
+            # A vehicle that still sends its stamped messages counts the silence itself: vehicle seconds by
+            # its own stamps, whatever the wall time. One that sends nothing is judged by wall time, and only
+            # after LINK_LOST_MIN_WALL_S of total quiet (a stall of either process is no lost link).
+            newest_s = self._clock.newest_s
+            talked_s = 0.0 if newest_s is None or self._heartbeat_stamp_s is None else \
+                newest_s - self._heartbeat_stamp_s
+            if talked_s > self.link_timeout_s:
+                raise LinkLost(operation=operation, reason=f"no heartbeat for {talked_s:.1f} vehicle s")
+            now_wall_s = time.monotonic()
+            silent_vehicle_s = (now_wall_s - self._last_heartbeat_wall) * self._clock.rate
+            quiet_wall_s = now_wall_s - max(self._last_heartbeat_wall, self._last_message_wall or 0.0)
+            if silent_vehicle_s > self.link_timeout_s and quiet_wall_s > LINK_LOST_MIN_WALL_S:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
 
     async def close(self) -> None:
