@@ -276,22 +276,31 @@ def test_a_heartbeat_sent_before_a_mode_change_but_read_after_its_ack_is_no_take
         heartbeat(FlightMode.STABILIZE, False, after_s=GuardedVehicle.CONFIRM_S)
 
 
-def test_a_stall_shorter_than_two_wall_seconds_is_not_a_lost_link(monkeypatch):
-    """At 40x, 5 vehicle s of heartbeat silence is 0.125 wall s: a stall of either process that long (or up to
-    LINK_LOST_MIN_WALL_S) is no lost link; a silence of more than LINK_LOST_MIN_WALL_S (and 5 vehicle s) is."""
+def _vehicle_at_a_frozen_wall_time(monkeypatch, *, rate: float):
+    """A MavlinkVehicle on a _SteppedClock at `rate` vehicle s per wall s, with wall time frozen at `now`:
+    (vehicle, clock, now)."""
     import time
 
-    from preland_app.errors import LinkLost
-    from preland_app.vehicle.mavlink_backend import LINK_LOST_MIN_WALL_S, MavlinkVehicle
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
 
-    assert LINK_LOST_MIN_WALL_S == 2.0
     vehicle = MavlinkVehicle(url="udp://:14550", link_timeout_s=5.0)
     clock = _SteppedClock()
-    clock.rate = 40.0
+    clock.rate = rate
     vehicle._clock = clock
     vehicle._direct = _OneMessage("HEARTBEAT", {})
     now = time.monotonic()
     monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now)
+    return vehicle, clock, now
+
+
+def test_a_stall_shorter_than_two_wall_seconds_is_not_a_lost_link(monkeypatch):
+    """At 40x, 5 vehicle s of heartbeat silence is 0.125 wall s: a stall of either process that long (or up to
+    LINK_LOST_MIN_WALL_S) is no lost link; a silence of more than LINK_LOST_MIN_WALL_S (and 5 vehicle s) is."""
+    from preland_app.errors import LinkLost
+    from preland_app.vehicle.mavlink_backend import LINK_LOST_MIN_WALL_S
+
+    assert LINK_LOST_MIN_WALL_S == 2.0
+    vehicle, clock, now = _vehicle_at_a_frozen_wall_time(monkeypatch, rate=40.0)
     vehicle._last_heartbeat_wall = now - 1.9  # 76 vehicle s at 40x, 1.9 wall s: a stall
     vehicle._check_link("telemetry")
     vehicle._last_heartbeat_wall = now - 2.1
@@ -310,18 +319,9 @@ def test_a_stall_shorter_than_two_wall_seconds_is_not_a_lost_link(monkeypatch):
 def test_a_vehicle_that_talks_without_heartbeats_has_lost_its_link_by_its_own_stamps(monkeypatch):
     """Heartbeats stop while stamped messages keep coming: lost after 5 vehicle s by the vehicle's stamps,
     within the 2 wall s that a wholly quiet link is given."""
-    import time
-
     from preland_app.errors import LinkLost
-    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
 
-    vehicle = MavlinkVehicle(url="udp://:14550", link_timeout_s=5.0)
-    clock = _SteppedClock()
-    clock.rate = 8.0
-    vehicle._clock = clock
-    vehicle._direct = _OneMessage("HEARTBEAT", {})
-    now = time.monotonic()
-    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now)
+    vehicle, clock, now = _vehicle_at_a_frozen_wall_time(monkeypatch, rate=8.0)
     vehicle._last_heartbeat_wall = now - 0.7  # 5.6 vehicle s at 8x, but only 0.7 wall s
     vehicle._last_message_wall = now
     vehicle._heartbeat_stamp_s = 100.0
