@@ -275,6 +275,20 @@ def test_a_heartbeat_sent_before_a_mode_change_but_read_after_its_ack_is_no_take
     with pytest.raises(PilotTakeover, match="mode STABILIZE, preland had set GUIDED"):
         heartbeat(FlightMode.STABILIZE, False, after_s=GuardedVehicle.CONFIRM_S)
 
+    # Read late (a backlog on a loaded machine): the clock has run past the grace, but by the stamps read
+    # before them the HEARTBEATs were sent before the change: no takeover, until the stamps move on.
+    vehicle._commanded_mode = vehicle._commanded_armed = None
+    guarded = GuardedVehicle(vehicle)
+    clock.newest_s = clock.time_s
+    heartbeat(FlightMode.STABILIZE, False)
+    asyncio.run(guarded.set_mode(FlightMode.GUIDED))
+    late = heartbeat(FlightMode.STABILIZE, False, after_s=COMMANDED_STATE_GRACE_S + 0.5)  # no newer stamp
+    assert late.mode is FlightMode.GUIDED
+    clock.newest_s = clock.time_s  # the backlog read: the vehicle's stamps are past the grace
+    assert heartbeat(FlightMode.STABILIZE, False).mode is FlightMode.STABILIZE
+    with pytest.raises(PilotTakeover, match="mode STABILIZE, preland had set GUIDED"):
+        heartbeat(FlightMode.STABILIZE, False, after_s=GuardedVehicle.CONFIRM_S)
+
 
 def _vehicle_at_a_frozen_wall_time(monkeypatch, *, rate: float):
     """A MavlinkVehicle on a _SteppedClock at `rate` vehicle s per wall s, with wall time frozen at `now`:

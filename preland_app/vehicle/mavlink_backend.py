@@ -213,9 +213,10 @@ class _Commanded:
         """Note a HEARTBEAT's value: once one reports the commanded value, HEARTBEATs alone tell."""
         self.confirmed = self.confirmed or heartbeat_value == self.value
 
-    def reported(self, heartbeat_value: Any, now_s: float) -> Any:
-        """What the vehicle is taken to be in, given the newest HEARTBEAT's `heartbeat_value`."""
-        if self.confirmed or now_s - self.acked_at_s >= COMMANDED_STATE_GRACE_S:
+    def reported(self, heartbeat_value: Any, heard_s: float) -> Any:
+        """What the vehicle is taken to be in, given the newest HEARTBEAT's `heartbeat_value`, sent at vehicle
+        time `heard_s`."""
+        if self.confirmed or heard_s - self.acked_at_s >= COMMANDED_STATE_GRACE_S:
             return heartbeat_value
         return self.value
 
@@ -652,10 +653,15 @@ class MavlinkVehicle:
         hx, hy, hz = self._home_local()
         now_s = self.clock.now_s()
         mode, armed = _heartbeat_mode(heartbeat), _heartbeat_armed(heartbeat)
+        # When the newest HEARTBEAT was sent, by the vehicle's clock: on a followed clock, the newest stamp read
+        # before it on the same ordered stream (a backlog read late, on a loaded machine, is still early), else
+        # the clock's own time.
+        followed = self.clock is self._clock and self._heartbeat_stamp_s is not None
+        heard_s = self._heartbeat_stamp_s if followed else now_s
         if self._commanded_armed is not None:
-            armed = self._commanded_armed.reported(armed, now_s)
+            armed = self._commanded_armed.reported(armed, heard_s)
         if self._commanded_mode is not None:
-            mode = self._commanded_mode.reported(mode, now_s)
+            mode = self._commanded_mode.reported(mode, heard_s)
         relative_m = glob.get("relative_alt", 0) / 1000.0
         rangefinder_valid = bool(distance) and distance["min_distance"] <= distance["current_distance"] <= \
             distance["max_distance"]
