@@ -9,7 +9,10 @@ from preland_app.sim.json_bridge import JsonBridge
 from preland_app.sim.multirotor import QuadXFrame, QuadXMultirotor
 from preland_app.sim.sensor_smoothing import SensorSmoothing
 from preland_app.sim.sitl_json import build_servo_packet
+from preland_app.sim.step_gate import StepGate
 from preland_app.vehicle.lockstep_clock import LockstepClock
+
+from .waiting import until
 
 FRAME_RATE_HZ = 1200  # ArduCopter SITL's physics rate
 
@@ -40,8 +43,10 @@ def test_a_reading_shows_the_physics_at_its_tick_and_the_physics_waits_while_it_
             tick = math.floor(clock.now_s() / period_s) + 1  # the next frame's tick
             await clock.sleep(tick * period_s - clock.now_s())
             at_wake_s = bridge.latest_state.time_s
-            # A slow detection, in wall time: the physics must not move meanwhile.
-            await asyncio.get_running_loop().run_in_executor(None, threading.Event().wait, 0.005)
+            # A detection that lasts until the physics thread stands at the hold, however loaded the
+            # machine: the physics must not move meanwhile.
+            await asyncio.get_running_loop().run_in_executor(
+                None, lambda: until(lambda: bridge.gate.waiting, timeout_s=30, what="the physics at the hold"))
             seen.append((tick, at_wake_s, bridge.latest_state.time_s))
 
     async def mission(clock: LockstepClock) -> None:
@@ -67,6 +72,22 @@ def test_a_reading_shows_the_physics_at_its_tick_and_the_physics_waits_while_it_
         assert tick * period_s <= at_wake_s < tick * period_s + step_s + 1e-9, (tick, at_wake_s)
         assert after_detection_s == at_wake_s  # held while the frame was processed
     assert bridge.counters.holds >= 30
+
+
+def test_a_task_that_joins_holds_the_physics_before_it_reads_the_time():
+    """The physics runs free until a sensor task joins; from the join on it must stand still, before the
+    task picks its first reading's time from the clock (else a loaded machine makes that reading late)."""
+    gate = StepGate()
+    gate.stepped(0.1325)  # where a free-running physics happens to be
+
+    async def sensor() -> tuple[float | None, float]:
+        clock = LockstepClock(gate=gate, stall_wall_s=30.0)
+        clock.join()
+        return gate.hold_at_s, clock.now_s()
+
+    hold_s, now_s = asyncio.run(sensor())
+    assert hold_s == now_s == 0.1325
+    assert gate.held()
 
 
 def test_smoothed_sensors_tell_a_levelling_touchdown_as_a_rotation():

@@ -36,6 +36,7 @@ class StepGate:
         self._on_wake: Callable[[float], None] | None = None
         self.holds = 0  # steps that had to wait for a hold to move
         self.held_wall_s = 0.0  # wall seconds the physics spent held
+        self.waiting = False  # the physics thread stands at the hold now
 
     @property
     def time_s(self) -> float:
@@ -75,8 +76,10 @@ class StepGate:
         started_wall_s = time.monotonic()
         self.holds += 1
         with self._condition:
+            self.waiting = True
             while self.held() and not stop.is_set():
                 self._condition.wait(_POLL_WALL_S)
+            self.waiting = False
         self.held_wall_s += time.monotonic() - started_wall_s
 
     def stepped(self, time_s: float) -> None:

@@ -141,6 +141,10 @@ class LockstepClock:
         self._loop = asyncio.get_running_loop()
         self._participants.add(task)
         task.add_done_callback(self._leave)
+        if not self._settling:  # (while settling, the physics already stands at the wake time)
+            # Held from this moment, not from the loop's next turn: the task reads the time next and picks
+            # its first reading's time from it, which the physics must not pass meanwhile.
+            self._gate.hold_at(self.now_s())
         self._update()
 
     def _leave(self, task: asyncio.Task) -> None:
