@@ -72,7 +72,7 @@ def _ray_processes(pid: int) -> set[int]:
             if "site-packages/ray/" in _cmdline(child) or _cmdline(child).startswith("ray::")}
 
 
-def _wait_gone(pids: set[int], timeout_s: float = 20.0) -> list[str]:
+def _wait_gone(pids: set[int], timeout_s: float = 60.0) -> list[str]:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and any(_alive(pid) for pid in pids):
         time.sleep(0.2)
@@ -108,14 +108,15 @@ def _stored(db: Path) -> int:
         return 0
 
 
-def _wait_stored(db: Path, count: int, process: subprocess.Popen, timeout_s: float = 90.0) -> int:
+def _wait_stored(db: Path, count: int, process: subprocess.Popen, timeout_s: float = 180.0) -> int:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and process.poll() is None:
         stored = _stored(db)
         if stored >= count:
             return stored
         time.sleep(0.05)
-    raise AssertionError(f"{count} trials were not stored in time ({process.poll()=})")
+    said = process.communicate(timeout=60)[1].decode(errors="replace")[-2000:] if process.poll() is not None else ""
+    raise AssertionError(f"{count} trials were not stored in time ({process.poll()=}): {said}")
 
 
 def _driver(args: list[str], **kwargs) -> subprocess.Popen:

@@ -320,10 +320,13 @@ def test_a_stall_shorter_than_two_wall_seconds_is_not_a_lost_link(monkeypatch):
     vehicle._last_heartbeat_wall = now - 2.1
     with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 84.0 vehicle s"):
         vehicle._check_link("telemetry")
-    clock.rate = 2.5  # up to 2.5x the vehicle seconds alone decide: 2.1 wall s is 5.25 vehicle s (5.3), lost
-    with pytest.raises(LinkLost, match="no heartbeat for 5.3 vehicle s"):
+    # Up to 2.5x the vehicle seconds alone decide: 2.2 wall s is 5.5 vehicle s, lost. (Not 2.1 s: 5.25 would
+    # print as 5.2 or 5.3 by the float that `now` - 2.1 happens to be.)
+    vehicle._last_heartbeat_wall = now - 2.2
+    clock.rate = 2.5
+    with pytest.raises(LinkLost, match="no heartbeat for 5.5 vehicle s"):
         vehicle._check_link("telemetry")
-    clock.rate = 1.0  # at 1x, 2.1 s of silence is within 5
+    clock.rate = 1.0  # at 1x, 2.2 s of silence is within 5
     vehicle._check_link("telemetry")
     vehicle._last_heartbeat_wall = now - 5.1
     with pytest.raises(LinkLost, match="no heartbeat for 5.1 vehicle s"):

@@ -57,14 +57,14 @@ class ServedSimulator:
         self._thread.join(timeout=5)
 
 
-@pytest.mark.parametrize("mode, paced", [("normal", False), ("irlock", True)])
-def test_thesis_mission_over_mavlink(thesis_mission, mode, paced):
+@pytest.mark.parametrize("mode, paced, faults", [("normal", False, {}), ("irlock", True, {"irlock": "burst:0.3:10"})])
+def test_thesis_mission_over_mavlink(thesis_mission, mode, paced, faults):
     # GPS alone follows the vehicle's clock, as on SITL and a drone; the IR-LOCK's 50 Hz readings fly in
-    # lock-step, each at its vehicle time however loaded the machine is.
+    # lock-step, each at its vehicle time however loaded the machine is, and lose some in bursts on the way.
     served = ServedSimulator(thesis_mission, seed=4, paced=paced)
     try:
-        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=thesis_mission, seed=4, land_mode=mode), url=served.url,
-                                          paced=paced))
+        request = TrialRequest(mission=thesis_mission, seed=4, land_mode=mode, faults=faults)
+        outcome = asyncio.run(fly_mavlink(request, url=served.url, paced=paced))
     finally:
         served.stop()
     assert outcome.outcome is Outcome.LANDED, outcome.message
@@ -80,6 +80,11 @@ def test_thesis_mission_over_mavlink(thesis_mission, mode, paced):
     assert outcome.landing_error_cm == pytest.approx(expected_cm, abs=3.0)
     if mode == "irlock":
         assert outcome.landing_error_cm < 15.0 and served.face.landing_targets > 100
+        details = outcome.details
+        assert details["irlock_fault"] == "burst:0.3:10"
+        assert 0.15 < details["irlock_dropped"] / details["irlock_produced"] < 0.45
+        # Every reading kept, and none dropped, reaches the vehicle as a LANDING_TARGET.
+        assert served.face.landing_targets == details["irlock_produced"] - details["irlock_dropped"]
     else:
         assert 5.0 < outcome.landing_error_cm < 300.0
     assert 15.0 < outcome.landing_time_s < 40.0

@@ -8,6 +8,9 @@ fusion. Kinds:
 * `permanent` (drop everything);
 * `below:H` / `above:H` (drop while the height above the target, as the vehicle
   knows it, is <= H or >= H metres);
+* `burst:LOSS:LENGTH` (drops in bursts: a two-state Gilbert channel, the
+  loss-free/all-lost case of Gilbert-Elliott, whose long-run share of dropped
+  values is LOSS and whose bursts last LENGTH values on average);
 
 each optionally suffixed `:first-attempt` to apply during the first landing
 attempt only (the thesis' Table 5 removes the failure on the second attempt).
@@ -19,6 +22,7 @@ documented rules; it converts to per-sensor `FaultSpec`s.
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,24 +38,28 @@ class FaultKind(enum.Enum):
     PERMANENT = "permanent"
     BELOW = "below"
     ABOVE = "above"
+    BURST = "burst"
 
 
 class FaultSyntaxError(ValueError):
     """A fault string that does not parse; the message says what is expected."""
 
 
-FAULT_SYNTAX = "none, random:P, periodic:KEEP:DROP, permanent, below:H or above:H, optionally with :first-attempt"
+FAULT_SYNTAX = ("none, random:P, periodic:KEEP:DROP, permanent, below:H, above:H or burst:LOSS:LENGTH, optionally "
+                "with :first-attempt")
 
 
 @dataclass(frozen=True)
 class FaultSpec:
-    """One sensor's fault. `probability` for random; `keep`/`drop` counts for periodic; `height_m` for below/above."""
+    """One sensor's fault. `probability` for random, and the long-run share of values dropped for burst;
+    `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values) for burst."""
 
     kind: FaultKind = FaultKind.NONE
     probability: float = 0.0
     keep: int = 0
     drop: int = 0
     height_m: float = 0.0
+    burst_length: float = 0.0
     first_attempt_only: bool = False
 
     def __post_init__(self) -> None:
@@ -63,6 +71,15 @@ class FaultSpec:
             raise FaultSyntaxError("periodic needs KEEP or DROP > 0")
         if self.kind in (FaultKind.BELOW, FaultKind.ABOVE) and self.height_m < 0:
             raise FaultSyntaxError(f"height must be >= 0 m, got {self.height_m:g}")
+        if self.kind is FaultKind.BURST:
+            if not (math.isfinite(self.burst_length) and self.burst_length >= 1.0):
+                raise FaultSyntaxError(f"burst length must be >= 1 value, got {self.burst_length:g}")
+            # A burst ends after each value with probability 1/LENGTH; one starts with the probability that
+            # makes LOSS the stationary share of the lost state, which must be a probability.
+            most = self.burst_length / (1.0 + self.burst_length)
+            if self.probability > most:
+                raise FaultSyntaxError(f"burst loss {self.probability:g} cannot last {self.burst_length:g} values "
+                                       f"on average: at most {most:.3g} (LENGTH / (1 + LENGTH))")
 
     @classmethod
     def parse(cls, text: str) -> "FaultSpec":
@@ -78,7 +95,7 @@ class FaultSpec:
         except ValueError:
             raise FaultSyntaxError(f"unknown fault {text!r} (expected {FAULT_SYNTAX})") from None
         expected = {FaultKind.NONE: 0, FaultKind.PERMANENT: 0, FaultKind.RANDOM: 1, FaultKind.PERIODIC: 2,
-                     FaultKind.BELOW: 1, FaultKind.ABOVE: 1}[kind]
+                     FaultKind.BELOW: 1, FaultKind.ABOVE: 1, FaultKind.BURST: 2}[kind]
         if len(args) != expected:
             raise FaultSyntaxError(f"fault {text!r}: {kind.value} takes {expected} value(s) (expected {FAULT_SYNTAX})")
         try:
@@ -88,6 +105,9 @@ class FaultSpec:
                 return cls(kind, keep=int(args[0]), drop=int(args[1]), first_attempt_only=first_attempt)
             if kind in (FaultKind.BELOW, FaultKind.ABOVE):
                 return cls(kind, height_m=float(args[0]), first_attempt_only=first_attempt)
+            if kind is FaultKind.BURST:
+                return cls(kind, probability=float(args[0]), burst_length=float(args[1]),
+                           first_attempt_only=first_attempt)
         except ValueError as error:
             if isinstance(error, FaultSyntaxError):
                 raise
@@ -102,6 +122,7 @@ class FaultSpec:
             FaultKind.PERIODIC: f"periodic:{self.keep}:{self.drop}",
             FaultKind.BELOW: f"below:{self.height_m:g}",
             FaultKind.ABOVE: f"above:{self.height_m:g}",
+            FaultKind.BURST: f"burst:{self.probability:g}:{self.burst_length:g}",
         }[self.kind]
         return text + (f":{FIRST_ATTEMPT_SUFFIX}" if self.first_attempt_only else "")
 
@@ -172,6 +193,7 @@ class FaultInjector:
         self.spec = spec
         self._rng = rng
         self._phase = 0
+        self._in_burst: bool | None = None  # the burst channel's state (None: not drawn yet)
         self.produced = 0
         self.dropped = 0
 
@@ -179,6 +201,7 @@ class FaultInjector:
         """Change the fault at runtime (the fault command); the periodic phase restarts."""
         self.spec = spec
         self._phase = 0
+        self._in_burst = None
 
     def admit(self, *, height_m: float | None, attempt: int = 1) -> bool:
         """One new value: True to keep it, False to drop it. `height_m`: height above the target as the
@@ -206,4 +229,18 @@ class FaultInjector:
             return height_m is not None and height_m <= spec.height_m
         if kind is FaultKind.ABOVE:
             return height_m is not None and height_m >= spec.height_m
+        if kind is FaultKind.BURST:
+            return self._burst_drops(spec)
         return False
+
+    def _burst_drops(self, spec: FaultSpec) -> bool:
+        """Gilbert's channel, one step a value: the first value finds it in its stationary state (lost with
+        probability LOSS); after each value a burst ends with probability 1/LENGTH, and a run of kept values
+        ends with probability LOSS / (LENGTH * (1 - LOSS))."""
+        if self._in_burst is None:
+            self._in_burst = bool(self._rng.random() < spec.probability)
+            return self._in_burst
+        ends = 1.0 / spec.burst_length
+        starts = ends * spec.probability / (1.0 - spec.probability)  # LOSS < 1: checked with the spec
+        self._in_burst = bool(self._rng.random() >= ends) if self._in_burst else bool(self._rng.random() < starts)
+        return self._in_burst
