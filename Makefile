@@ -45,6 +45,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/record.py land_modes_table.py
 	$(VENV)/bin/python benchmarks/record.py fault_scenarios_table.py
 	$(VENV)/bin/python benchmarks/record.py drop_rate_sensitivity.py
+	$(VENV)/bin/python benchmarks/record.py fault_kinds.py
 	$(VENV)/bin/python benchmarks/record.py error_budget.py
 	$(VENV)/bin/python benchmarks/record.py paper_table.py
 	@if [ -n "$$PRELAND_SITL_BINARY" ]; then $(VENV)/bin/python benchmarks/record.py sitl_vs_embedded.py && \

@@ -90,6 +90,43 @@ def test_thesis_mission_over_mavlink(thesis_mission, mode, paced, faults):
     assert 15.0 < outcome.landing_time_s < 40.0
 
 
+class _PhysicsBeside:
+    """A physics in the companion's process that the sensors see the world from (as SITL's JSON bridge is): here
+    the served simulator's own state, shifted 0.37 m north so that a score read from it is told from one read
+    from SIM_STATE."""
+
+    SHIFT_NORTH_M = 0.37
+
+    def __init__(self, simulator: Simulator) -> None:
+        self.simulator = simulator
+
+    def pose(self):
+        raise AssertionError("the normal land mode reads no sensor")
+
+    def time_s(self) -> float:
+        return self.simulator.true_pose().time_s
+
+    def ned(self) -> tuple[float, float, float]:
+        pose = self.simulator.true_pose()
+        return pose.north_m + self.SHIFT_NORTH_M, pose.east_m, -pose.down_m
+
+
+def test_a_physics_beside_the_companion_is_the_truth_the_landing_is_scored_by(thesis_mission):
+    served = ServedSimulator(thesis_mission, seed=6)
+    try:
+        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=thesis_mission, seed=6, land_mode="normal"),
+                                          url=served.url, sensor_truth=_PhysicsBeside(served.simulator)))
+    finally:
+        served.stop()
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    rest = served.simulator.true_pose()
+    assert rest.on_ground
+    # Exact (not SIM_STATE's rounding of about a centimetre): the trajectory's last truth row is the state the
+    # vehicle came to rest in, shifted.
+    expected_cm = 100 * ((rest.north_m + _PhysicsBeside.SHIFT_NORTH_M) ** 2 + rest.east_m ** 2) ** 0.5
+    assert outcome.landing_error_cm == pytest.approx(expected_cm, abs=1e-6)
+
+
 def test_a_stalled_truth_stream_blinds_the_sensors_instead_of_showing_old_views(thesis_mission):
     # SIM_STATE stops for 2.5 vehicle s, half a second into LAND, while the rest of the telemetry goes on (a
     # stalled link or process). Readings of the last pose stamped with the present had the autopilot chase a

@@ -87,7 +87,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     at its vehicle time however slow this machine is. `lockstep` (a `LockstepClock`): the vehicle is SITL on
     a physics in this process that owns time, and this is its clock; `sensor_truth` (with `pose()` and
     `time_s()`): where the simulated sensors see the world from, instead of SIM_STATE (that physics' own
-    state, exact at each reading's time)."""
+    state, exact at each reading's time), and with `ned()` what the trajectory and the score read too."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
     vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path,
@@ -144,7 +144,9 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     runner = MissionRunner(spec=mission, vehicle=vehicle, strategy=strategy, events=events,
                            rng=child_rng(request.seed, "landing"), sensors=sensors,
                            takeoff_altitude_rel_m=request.takeoff_altitude_rel_m)
-    recorder = TrajectoryRecorder(vehicle=vehicle, clock=clock, truth=truth_source.ned if truth_source else None)
+    # A physics in this process that renders the sensors (`sensor_truth` with `ned`) is the truth it is scored by.
+    recorded_truth = getattr(sensor_truth, "ned", None) or (truth_source.ned if truth_source else None)
+    recorder = TrajectoryRecorder(vehicle=vehicle, clock=clock, truth=recorded_truth)
     recording = asyncio.ensure_future(recorder.run())
     listener = None
     if fault_listen is not None:

@@ -477,6 +477,12 @@ class BridgeTruth:
         """The physics time (vehicle s) of that state."""
         return self.bridge.latest_state.time_s
 
+    def ned(self) -> tuple[float, float, float]:
+        """The true (north_m, east_m, altitude_m) from the start, as the physics has it: the trajectory and
+        the score read it instead of SIM_STATE, whose 1e-7 degree integers round a position to about 1 cm."""
+        north_m, east_m, down_m = self.bridge.latest_state.position_ned_m
+        return north_m, east_m, -down_m
+
 
 async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: str | None = None) -> TrialOutcome:
     """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE). SITL ending during
