@@ -23,8 +23,10 @@ fly: $(STAMP)
 
 # Each test module on one worker (--dist loadfile): the Ray tests then share one local Ray instance. The
 # modules go out in collection order (--no-loadscope-reorder), which puts the longest first (tests/conftest.py).
+# The suite starts hundreds of Python processes (campaign workers, CLI runs, tutorials): with bytecode written
+# (PYTHONDONTWRITEBYTECODE emptied, where the environment sets it), each module is compiled once, not in each.
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest -q -n 4 --dist loadfile --no-loadscope-reorder
+	PYTHONDONTWRITEBYTECODE= $(VENV)/bin/python -m pytest -q -n 4 --dist loadfile --no-loadscope-reorder
 
 # Builds the docs site into site/ (strict: a broken link or a missing page fails).
 # The two variables silence the notices MkDocs plugins print about MkDocs 2 (see docs/contributing.md).
