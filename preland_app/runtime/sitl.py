@@ -485,8 +485,8 @@ class BridgeTruth:
 
 
 async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: str | None = None) -> TrialOutcome:
-    """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE). SITL ending during
-    the trial ends it with outcome `error` naming how SITL ended."""
+    """One trial on a fresh SITL process, scored from SITL's ground truth (SIM_STATE; on preland's physics,
+    the physics' own state). SITL ending during the trial ends it with outcome `error` naming how SITL ended."""
     mission = request.resolved_mission()
     options = replace(options, speedup=options.speedup_for(uses_camera=mission.land.strategy().uses_marker))
     gps = GpsErrorDriver(spec=mission.environment.navigation, seed=request.seed,
