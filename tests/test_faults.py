@@ -97,9 +97,38 @@ def test_a_new_burst_fault_starts_from_its_stationary_state():
     assert np.mean(firsts) == pytest.approx(0.25, abs=0.03)
 
 
+def test_stale_gives_the_last_value_again_as_new_in_the_asked_share():
+    injector = _injector("stale:0.3", seed=4)
+    given = [injector.apply(k, height_m=5.0) for k in range(10_000)]
+    assert injector.produced == 10_000 and injector.dropped == 0
+    assert injector.repeated == sum(1 for k, value in enumerate(given) if value != k)
+    assert injector.repeated / injector.produced == pytest.approx(0.3, abs=0.02)
+    # A value given again is the one given just before it: nothing is dropped, nothing invented.
+    assert given[0] == 0 and all(value in (k, given[k - 1]) for k, value in enumerate(given) if k)
+    # With a restamp, the old value carries the new one's time.
+    restamping = _injector("stale:1", seed=4)
+    assert restamping.apply(("old", 1.0), height_m=None) == ("old", 1.0)  # nothing to repeat yet: the value
+    assert restamping.apply(("new", 2.0), height_m=None, restamp=lambda old, new: (old[0], new[1])) == ("old", 2.0)
+    assert not restamping.admit(height_m=None)  # admit: the new value is not the one used
+
+
+def test_a_stale_fault_repeats_readings_and_the_outcome_records_it():
+    """The marker's detections, half of them replaced by the frame before's: the vehicle lands, nothing is
+    dropped, and the outcome counts the values given again."""
+    import preland_app as preland
+
+    mission = preland.load_mission(THESIS_MISSION)
+    outcome = preland.fly(mission, seed=3, land="marker", faults={"marker": "stale:0.5"}, record_trajectory=False)
+    assert outcome.outcome is preland.Outcome.LANDED and outcome.landing_error_cm < 30.0
+    details = outcome.details
+    assert details["marker_fault"] == "stale:0.5" and details["marker_dropped"] == 0
+    assert 0.35 < details["marker_repeated"] / details["marker_produced"] < 0.65
+
+
 @pytest.mark.parametrize("text", ["random", "random:1.5", "periodic:3", "below", "sometimes", "periodic:0:0",
                                   "below:-1", "random:x", "permanent:2", "burst:0.3", "burst:0.3:0.5",
-                                  "burst:0.6:1", "burst:1:5", "burst:0.3:inf", "burst:-0.1:3"])
+                                  "burst:0.6:1", "burst:1:5", "burst:0.3:inf", "burst:-0.1:3", "stale",
+                                  "stale:1.5", "stale:0.2:3"])
 def test_bad_fault_syntax_is_rejected(text):
     with pytest.raises(FaultSyntaxError):
         FaultSpec.parse(text)
@@ -107,7 +136,7 @@ def test_bad_fault_syntax_is_rejected(text):
 
 def test_fault_syntax_round_trips():
     for text in ("none", "random:0.5", "periodic:4:1", "permanent", "below:3", "above:2.5:first-attempt",
-                 "burst:0.3:5", "burst:0.5:2.5:first-attempt"):
+                 "burst:0.3:5", "burst:0.5:2.5:first-attempt", "stale:0.25"):
         assert str(FaultSpec.parse(text)) == text
 
 

@@ -313,3 +313,43 @@ def test_the_example_plugin_lands_through_the_mavlink_face(proportional_installe
     assert outcome.landing_error_cm == pytest.approx(expected_cm, abs=3.0) and outcome.landing_error_cm < 30.0
     assert outcome.details["frames_with_marker"] > 50
     assert outcome.landing_time_s is not None and 10.0 < outcome.landing_time_s < 40.0
+
+
+def test_a_plugins_views_give_a_stale_value_again_as_the_built_in_modes_do():
+    """Under `stale:1` every value after the first is the first one again: the IR-LOCK view's with the new
+    reading's capture time, the detector view's as the detections of that first frame."""
+    import numpy as np
+
+    from preland_app.landing.boundary import DetectorView, IrLockView, SensorFaults
+    from preland_app.sensing.faults import FaultSpec
+    from preland_app.sensing.readings import TargetReading
+
+    faults = SensorFaults(faults={"irlock": FaultSpec.parse("stale:1"), "marker": FaultSpec.parse("stale:1")},
+                          rng=np.random.default_rng(0))
+
+    class Beacon:
+        def __init__(self) -> None:
+            self.k = 0
+
+        async def next_reading(self) -> TargetReading:
+            self.k += 1
+            return TargetReading(sensor="irlock", capture_time_s=0.02 * self.k, angle_x_rad=0.01 * self.k,
+                                 angle_y_rad=0.0)
+
+    view = IrLockView(Beacon(), faults)
+    first, second, third = (asyncio.run(view.next_reading()) for _ in range(3))
+    assert (first.capture_time_s, first.angle_x_rad) == (0.02, 0.01)
+    assert (second.capture_time_s, second.angle_x_rad) == (0.04, 0.01)
+    assert (third.capture_time_s, third.angle_x_rad) == pytest.approx((0.06, 0.01))
+
+    class Detector:
+        def __init__(self) -> None:
+            self.k = 0
+
+        def detect(self, image):
+            self.k += 1
+            return [f"marker seen in frame {self.k}"]
+
+    detector = DetectorView(Detector(), faults)
+    assert [detector.detect(None) for _ in range(3)] == [["marker seen in frame 1"]] * 3
+    assert faults.details()["irlock_repeated"] == 2 and faults.details()["marker_repeated"] == 2

@@ -127,9 +127,9 @@ def fly(
     sensor: Optional[PrecisionSensor] = typer.Option(None, "--sensor", help="Precision sensor of the cautious "
                                                      "mode."),
     fault: list[str] = typer.Option([], "--fault", metavar="SENSOR=FAULT",
-                                    help="Drop a sensor's values (repeatable, one per sensor): none, random:P, "
-                                         "periodic:KEEP:DROP, permanent, below:H, above:H, burst:LOSS:LENGTH; "
-                                         "add :first-attempt "
+                                    help="Drop a sensor's values or give its last one again (repeatable, one "
+                                         "per sensor): none, random:P, periodic:KEEP:DROP, permanent, below:H, "
+                                         "above:H, burst:LOSS:LENGTH, stale:P; add :first-attempt "
                                          "to limit it to the first landing attempt. E.g. marker=below:3."),
     seed: int = typer.Option(1, "--seed", help="Trial seed: same seed, same outcome."),
     takeoff_altitude_m: Optional[float] = typer.Option(

@@ -18,9 +18,9 @@ to what they deliver; the built-in precision modes apply their own.
 from __future__ import annotations
 
 import weakref
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -36,6 +36,8 @@ from ..vehicle.protocol import Vehicle
 from ..vehicle.types import FlightMode, LandingTarget, PositionNed, Telemetry, VelocityNed
 from .attempts import AttemptTracker
 from .fault_gate import FaultGate
+
+V = TypeVar("V")
 
 # view -> what it forwards to. Only this module reads it; a view holds no reference to its target.
 _TARGETS: weakref.WeakKeyDictionary[object, Any] = weakref.WeakKeyDictionary()
@@ -184,8 +186,10 @@ class SensorFaults:
         if self.landing:
             self.attempts.update(telemetry.altitude_rel_m)
 
-    def admit(self, sensor: str) -> bool:
-        return self.gate.admit(sensor, height_m=self.height_m, attempt=self.attempts.attempt)
+    def apply(self, sensor: str, value: V, restamp: Callable[[V, V], V] | None = None) -> V | None:
+        """A new value of `sensor`: what the plugin gets in its place (None: dropped; see `FaultGate.apply`)."""
+        return self.gate.apply(sensor, value, height_m=self.height_m, attempt=self.attempts.attempt,
+                               restamp=restamp)
 
     def details(self) -> dict[str, Any]:
         """Per sensor: the fault, the values produced and the values dropped (as the built-in modes report)."""
@@ -231,8 +235,8 @@ class DetectorView:
 
     @staticmethod
     def _admitted(detections: list[MarkerDetection], faults: SensorFaults | None) -> list[MarkerDetection]:
-        if detections and faults is not None and not faults.admit("marker"):
-            return []
+        if detections and faults is not None:
+            return faults.apply("marker", detections) or []
         return detections
 
 
@@ -248,8 +252,8 @@ class IrLockView:
     async def next_reading(self) -> TargetReading | None:
         source, faults = _TARGETS[self]
         reading = await source.next_reading()
-        if reading is not None and faults is not None and not faults.admit("irlock"):
-            return None
+        if reading is not None and faults is not None:
+            return faults.apply("irlock", reading, restamp=TargetReading.restamped)
         return reading
 
 

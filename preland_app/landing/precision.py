@@ -168,9 +168,11 @@ class PrecisionLanding:
 
     async def _deliver(self, context: LandingContext, reading: TargetReading) -> None:
         """A new sensor value: through the fault injector, then to the fused sensor or the autopilot."""
-        if self.gate is not None and not self.gate.admit(reading.sensor, height_m=self._height_m,
-                                                         attempt=self.attempt):
-            return
+        if self.gate is not None:
+            reading = self.gate.apply(reading.sensor, reading, height_m=self._height_m, attempt=self.attempt,
+                                      restamp=TargetReading.restamped)
+            if reading is None:
+                return
         if self._fused is not None:
             self._fused.offer(reading)
             return

@@ -1,7 +1,7 @@
 """Fault injection: sensor values dropped on purpose (thesis Chapter 7 and Section 8.2.3).
 
-Faults only ever drop values, never distort them, and apply per sensor before
-fusion. Kinds:
+Faults drop values or give an old one again in a new one's place (never a
+distorted value), and apply per sensor before fusion. Kinds:
 
 * `none`; `random:P` (drop each new value with probability P);
 * `periodic:KEEP:DROP` (keep KEEP values, drop DROP, repeat);
@@ -11,6 +11,8 @@ fusion. Kinds:
 * `burst:LOSS:LENGTH` (drops in bursts: a two-state Gilbert channel, the
   loss-free/all-lost case of Gilbert-Elliott, whose long-run share of dropped
   values is LOSS and whose bursts last LENGTH values on average);
+* `stale:P` (each new value is, with probability P, replaced by the value the
+  sensor gave last, sent again as new: a frozen frame or reading);
 
 each optionally suffixed `:first-attempt` to apply during the first landing
 attempt only (the thesis' Table 5 removes the failure on the second attempt).
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,19 +42,20 @@ class FaultKind(enum.Enum):
     BELOW = "below"
     ABOVE = "above"
     BURST = "burst"
+    STALE = "stale"
 
 
 class FaultSyntaxError(ValueError):
     """A fault string that does not parse; the message says what is expected."""
 
 
-FAULT_SYNTAX = ("none, random:P, periodic:KEEP:DROP, permanent, below:H, above:H or burst:LOSS:LENGTH, optionally "
-                "with :first-attempt")
+FAULT_SYNTAX = ("none, random:P, periodic:KEEP:DROP, permanent, below:H, above:H, burst:LOSS:LENGTH or stale:P, "
+                "optionally with :first-attempt")
 
 
 @dataclass(frozen=True)
 class FaultSpec:
-    """One sensor's fault. `probability` for random, and the long-run share of values dropped for burst;
+    """One sensor's fault. `probability` for random and stale, and the long-run share of values dropped for burst;
     `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values) for burst."""
 
     kind: FaultKind = FaultKind.NONE
@@ -95,11 +99,11 @@ class FaultSpec:
         except ValueError:
             raise FaultSyntaxError(f"unknown fault {text!r} (expected {FAULT_SYNTAX})") from None
         expected = {FaultKind.NONE: 0, FaultKind.PERMANENT: 0, FaultKind.RANDOM: 1, FaultKind.PERIODIC: 2,
-                     FaultKind.BELOW: 1, FaultKind.ABOVE: 1, FaultKind.BURST: 2}[kind]
+                     FaultKind.BELOW: 1, FaultKind.ABOVE: 1, FaultKind.BURST: 2, FaultKind.STALE: 1}[kind]
         if len(args) != expected:
             raise FaultSyntaxError(f"fault {text!r}: {kind.value} takes {expected} value(s) (expected {FAULT_SYNTAX})")
         try:
-            if kind is FaultKind.RANDOM:
+            if kind in (FaultKind.RANDOM, FaultKind.STALE):
                 return cls(kind, probability=float(args[0]), first_attempt_only=first_attempt)
             if kind is FaultKind.PERIODIC:
                 return cls(kind, keep=int(args[0]), drop=int(args[1]), first_attempt_only=first_attempt)
@@ -123,6 +127,7 @@ class FaultSpec:
             FaultKind.BELOW: f"below:{self.height_m:g}",
             FaultKind.ABOVE: f"above:{self.height_m:g}",
             FaultKind.BURST: f"burst:{self.probability:g}:{self.burst_length:g}",
+            FaultKind.STALE: f"stale:{self.probability:g}",
         }[self.kind]
         return text + (f":{FIRST_ATTEMPT_SUFFIX}" if self.first_attempt_only else "")
 
@@ -186,7 +191,8 @@ class FaultCommand:
 
 
 class FaultInjector:
-    """Applies one FaultSpec to a stream of new values from one sensor; counts what it keeps and drops."""
+    """Applies one FaultSpec to a stream of new values from one sensor; counts what it keeps, drops and
+    gives again (stale)."""
 
     def __init__(self, *, sensor: str, spec: FaultSpec, rng: np.random.Generator) -> None:
         self.sensor = sensor
@@ -194,25 +200,42 @@ class FaultInjector:
         self._rng = rng
         self._phase = 0
         self._in_burst: bool | None = None  # the burst channel's state (None: not drawn yet)
+        self._last: object | None = None  # the value given out last (a stale fault gives it again)
         self.produced = 0
         self.dropped = 0
+        self.repeated = 0
 
     def set_spec(self, spec: FaultSpec) -> None:
         """Change the fault at runtime (the fault command); the periodic phase restarts."""
         self.spec = spec
         self._phase = 0
         self._in_burst = None
+        self._last = None
 
     def admit(self, *, height_m: float | None, attempt: int = 1) -> bool:
-        """One new value: True to keep it, False to drop it. `height_m`: height above the target as the
-        vehicle knows it (None when unknown: height faults then keep the value)."""
+        """One new value: True to use it, False where the fault drops it or gives an older one instead.
+        `height_m`: height above the target as the vehicle knows it (None when unknown: height faults then
+        keep the value)."""
+        new = object()
+        return self.apply(new, height_m=height_m, attempt=attempt) is new
+
+    def apply(self, value: object, *, height_m: float | None, attempt: int = 1,
+              restamp: Callable[[object, object], object] | None = None) -> object | None:
+        """One new value: what to use in its place. None where the fault drops it; the value given out last
+        where a stale fault gives that again (`restamp(old, new)`, when given, makes it carry the new one's
+        time); else `value` itself. `height_m` and `attempt` as in `admit`."""
         self.produced += 1
         spec = self.spec
         active = spec.active and not (spec.first_attempt_only and attempt > 1)
-        drop = active and self._should_drop(spec, height_m)
-        if drop:
+        if active and spec.kind is FaultKind.STALE:
+            if self._last is not None and self._rng.random() < spec.probability:
+                self.repeated += 1
+                return restamp(self._last, value) if restamp is not None else self._last
+        elif active and self._should_drop(spec, height_m):
             self.dropped += 1
-        return not drop
+            return None
+        self._last = value
+        return value
 
     def _should_drop(self, spec: FaultSpec, height_m: float | None) -> bool:
         kind = spec.kind

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..vehicle.types import LandingTarget
 
@@ -21,6 +21,10 @@ class TargetReading:
     angle_y_rad: float
     distance_m: float | None = None
     marker_id: int | None = None
+
+    def restamped(self, new: "TargetReading") -> "TargetReading":
+        """This value, given again in `new`'s place: `new`'s capture time (a stale fault)."""
+        return replace(self, capture_time_s=new.capture_time_s)
 
     def to_landing_target(self) -> LandingTarget:
         return LandingTarget(timestamp_s=self.capture_time_s, angle_x_rad=self.angle_x_rad,
