@@ -228,10 +228,10 @@ def test_fly_the_api_and_a_campaign_fly_over_mavlink_against_sim_serve(thesis_mi
                                        "--no-preflight", "--paced", "--json"])
         assert cli.exit_code == 0, cli.output
         data = json.loads(cli.stdout)
-        assert data["outcome"] == "landed" and data["landing_error_cm"] < 15.0
+        assert data["outcome"] == "landed" and data["landing_error_cm"] < 15.0, data.get("message")
         assert data["details"]["runtime"] == "mavlink" and data["details"]["paced_grants"] > 1000
         api = preland.fly(thesis_mission, land="irlock", runtime=url, options=paced)
-        assert api.outcome.value == "landed" and api.landing_error_cm < 15.0
+        assert api.outcome.value == "landed" and api.landing_error_cm < 15.0, api.message
         campaign = _campaign(tmp_path, "trials: 2\nscenarios: [{label: ir, land: irlock}]\n")
         run = preland.run_campaign(campaign, db=tmp_path / "m.db", runtime=url, options=paced)
         assert (run.ran, run.total) == (2, 2)
