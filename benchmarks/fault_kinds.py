@@ -114,7 +114,8 @@ def report_lines(results: list[tuple], seeds: int) -> list[str]:
                    f"{statistics.median(values) if values else float('nan'):>6.1f} "
                    f"{statistics.stdev(values) if len(values) > 1 else float('nan'):>6.1f} "
                    f"{statistics.mean(times) if times else float('nan'):>6.1f} "
-                   f"{statistics.mean(r[4] for r in rows):>7.2f} {statistics.mean(r[5] for r in rows):>6.2f} {cost} {p}")
+                   f"{statistics.mean(r[4] for r in rows):>7.2f} {statistics.mean(r[5] for r in rows):>6.2f} "
+                   f"{cost} {p}")
     return out
 
 

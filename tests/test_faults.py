@@ -105,10 +105,15 @@ def test_stale_gives_the_last_value_again_as_new_in_the_asked_share():
     assert injector.repeated / injector.produced == pytest.approx(0.3, abs=0.02)
     # A value given again is the one given just before it: nothing is dropped, nothing invented.
     assert given[0] == 0 and all(value in (k, given[k - 1]) for k, value in enumerate(given) if k)
-    # With a restamp, the old value carries the new one's time.
+    # A reading given again carries the new one's time.
+    from preland_app.sensing.readings import TargetReading
+
+    def reading(angle_x_rad: float, time_s: float) -> TargetReading:
+        return TargetReading(sensor="irlock", capture_time_s=time_s, angle_x_rad=angle_x_rad, angle_y_rad=0.0)
+
     restamping = _injector("stale:1", seed=4)
-    assert restamping.apply(("old", 1.0), height_m=None) == ("old", 1.0)  # nothing to repeat yet: the value
-    assert restamping.apply(("new", 2.0), height_m=None, restamp=lambda old, new: (old[0], new[1])) == ("old", 2.0)
+    assert restamping.apply(reading(0.1, 1.0), height_m=None) == reading(0.1, 1.0)  # nothing to repeat yet
+    assert restamping.apply(reading(0.2, 2.0), height_m=None) == reading(0.1, 2.0)
     assert not restamping.admit(height_m=None)  # admit: the new value is not the one used
 
 

@@ -18,7 +18,7 @@ to what they deliver; the built-in precision modes apply their own.
 from __future__ import annotations
 
 import weakref
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -186,10 +186,9 @@ class SensorFaults:
         if self.landing:
             self.attempts.update(telemetry.altitude_rel_m)
 
-    def apply(self, sensor: str, value: V, restamp: Callable[[V, V], V] | None = None) -> V | None:
+    def apply(self, sensor: str, value: V) -> V | None:
         """A new value of `sensor`: what the plugin gets in its place (None: dropped; see `FaultGate.apply`)."""
-        return self.gate.apply(sensor, value, height_m=self.height_m, attempt=self.attempts.attempt,
-                               restamp=restamp)
+        return self.gate.apply(sensor, value, height_m=self.height_m, attempt=self.attempts.attempt)
 
     def details(self) -> dict[str, Any]:
         """Per sensor: the fault, the values produced and the values dropped (as the built-in modes report)."""
@@ -253,7 +252,7 @@ class IrLockView:
         source, faults = _TARGETS[self]
         reading = await source.next_reading()
         if reading is not None and faults is not None:
-            return faults.apply("irlock", reading, restamp=TargetReading.restamped)
+            return faults.apply("irlock", reading)
         return reading
 
 

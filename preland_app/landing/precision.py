@@ -169,8 +169,7 @@ class PrecisionLanding:
     async def _deliver(self, context: LandingContext, reading: TargetReading) -> None:
         """A new sensor value: through the fault injector, then to the fused sensor or the autopilot."""
         if self.gate is not None:
-            reading = self.gate.apply(reading.sensor, reading, height_m=self._height_m, attempt=self.attempt,
-                                      restamp=TargetReading.restamped)
+            reading = self.gate.apply(reading.sensor, reading, height_m=self._height_m, attempt=self.attempt)
             if reading is None:
                 return
         if self._fused is not None:

@@ -25,10 +25,11 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from .readings import TargetReading
 
 SENSORS = ("irlock", "marker")
 FIRST_ATTEMPT_SUFFIX = "first-attempt"
@@ -219,18 +220,19 @@ class FaultInjector:
         new = object()
         return self.apply(new, height_m=height_m, attempt=attempt) is new
 
-    def apply(self, value: object, *, height_m: float | None, attempt: int = 1,
-              restamp: Callable[[object, object], object] | None = None) -> object | None:
+    def apply(self, value: object, *, height_m: float | None, attempt: int = 1) -> object | None:
         """One new value: what to use in its place. None where the fault drops it; the value given out last
-        where a stale fault gives that again (`restamp(old, new)`, when given, makes it carry the new one's
-        time); else `value` itself. `height_m` and `attempt` as in `admit`."""
+        where a stale fault gives that again (a `TargetReading` with the new one's capture time); else
+        `value` itself. `height_m` and `attempt` as in `admit`."""
         self.produced += 1
         spec = self.spec
         active = spec.active and not (spec.first_attempt_only and attempt > 1)
         if active and spec.kind is FaultKind.STALE:
             if self._last is not None and self._rng.random() < spec.probability:
                 self.repeated += 1
-                return restamp(self._last, value) if restamp is not None else self._last
+                old = self._last
+                both_readings = isinstance(old, TargetReading) and isinstance(value, TargetReading)
+                return old.restamped(value) if both_readings else old
         elif active and self._should_drop(spec, height_m):
             self.dropped += 1
             return None

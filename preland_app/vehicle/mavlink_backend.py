@@ -71,8 +71,8 @@ STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 
 COMMANDED_STATE_GRACE_S = 2.0
 # A vehicle that sends nothing at all (no stamped message either) has its silence reckoned from wall time,
 # so at 8x the 5 vehicle s of link_timeout_s would be 0.6 wall s, and a stall of either process (a loaded
-# machine, a garbage collection) would read as a lost link. Such a link is lost only after this much wall time of quiet too (up
-# to 2.5x the 5 vehicle s alone decide; a SITL that has stopped is still found within 2 wall s).
+# machine, a garbage collection) would read as a lost link. Such a link is lost only after this much wall time
+# of quiet too (up to 2.5x the 5 vehicle s alone decide; a SITL that has stopped is still found within 2 wall s).
 LINK_LOST_MIN_WALL_S = 2.0
 # Ground truth for the simulated sensors: each of their readings needs a SIM_STATE of its own, and the
 # IR-LOCK reads at 50 Hz.
