@@ -1,13 +1,17 @@
 """What the kind of a fault costs beside how much it takes: Table 3's drop scenarios flown with the thesis'
-random drops, with burst drops of the same long-run share and with stale values in the same share, on the
-same seeds.
+random drops, with burst drops of the same long-run share, with stale values in the same share, and with
+every value delivered late, on the same seeds.
 
 The thesis drops each value on its own (random:P). A burst fault (burst:LOSS:LENGTH, Gilbert's two-state
 channel) drops the same share in runs of LENGTH values on average, as a marker out of view for a few frames
 would; a stale fault (stale:P) drops nothing but gives the last value again in place of a share P of the new
-ones. Per fault: the landing error (mean, median, sd; cm), the mean landing time (s), the share of values
-dropped and the share given again, the cost against the same scenario without a fault (difference of means,
-cm) and a two-sided Mann-Whitney U test of the errors against the random fault's at the same share (p).
+ones. A delay fault (delay:MS[:JITTER]) drops nothing but delivers each value MS ms late, with ArduPilot's
+default PLND_LAG of 20 ms and, in the rows marked so, with PLND_LAG set to the delay, as ArduPilot's
+precision-landing docs ask of a sensor with a known lag. Per fault: the landing error (mean, median, sd; cm),
+the mean landing time (s), the share of values dropped and the share given again, the cost against the same
+scenario without a fault (difference of means, cm) and a two-sided Mann-Whitney U test of the errors (p)
+against the random fault's at the same share (burst, stale) or against no fault (delay), Holm-corrected over
+the rows of the table.
 
 IR-LOCK (50 Hz) at random 0.75 against bursts of 5 and 25 readings (0.1 and 0.5 s); the marker (about
 15 frames a second) at random 0.5 against bursts of 3 and 15 frames (0.2 and 1 s). Weather and take-off
@@ -32,24 +36,39 @@ sys.path.insert(0, str(ROOT))
 
 from scipy.stats import mannwhitneyu  # noqa: E402
 
+from preland_app.campaign.fidelity_tests import holm  # noqa: E402
 from preland_app.config.mission import load_mission  # noqa: E402
 from preland_app.runtime.embedded import TrialRequest, run_trial  # noqa: E402
 
 CALM = {"speed_m_s": 0.5, "turbulence_w20_m_s": 0.5}
 
-# (scenario, land mode, sensor, fault or None, take-off m); the first fault of a scenario after "none" is the
-# thesis' random one, which the bursts are tested against.
+# (scenario, land mode, sensor, fault or None, take-off m, PLND_LAG s or None for the mission's); burst and
+# stale faults are tested against the scenario's random one, delays against no fault.
 LEVELS = [
-    ("T3 irlock", "irlock", "irlock", None, 10.0),
-    ("T3 irlock", "irlock", "irlock", "random:0.75", 10.0),
-    ("T3 irlock", "irlock", "irlock", "burst:0.75:5", 10.0),
-    ("T3 irlock", "irlock", "irlock", "burst:0.75:25", 10.0),
-    ("T3 irlock", "irlock", "irlock", "stale:0.75", 10.0),
-    ("T3 marker", "marker", "marker", None, 6.0),
-    ("T3 marker", "marker", "marker", "random:0.5", 6.0),
-    ("T3 marker", "marker", "marker", "burst:0.5:3", 6.0),
-    ("T3 marker", "marker", "marker", "burst:0.5:15", 6.0),
-    ("T3 marker", "marker", "marker", "stale:0.5", 6.0),
+    ("T3 irlock", "irlock", "irlock", None, 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "random:0.75", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "burst:0.75:5", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "burst:0.75:25", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "stale:0.75", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "delay:50", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "delay:100", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "delay:100:50", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "delay:200", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "delay:200", 10.0, 0.2),
+    ("T3 irlock", "irlock", "irlock", "delay:300", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "delay:400", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "delay:400", 10.0, 0.25),
+    ("T3 marker", "marker", "marker", None, 6.0, None),
+    ("T3 marker", "marker", "marker", "random:0.5", 6.0, None),
+    ("T3 marker", "marker", "marker", "burst:0.5:3", 6.0, None),
+    ("T3 marker", "marker", "marker", "burst:0.5:15", 6.0, None),
+    ("T3 marker", "marker", "marker", "stale:0.5", 6.0, None),
+    ("T3 marker", "marker", "marker", "delay:50", 6.0, None),
+    ("T3 marker", "marker", "marker", "delay:100", 6.0, None),
+    ("T3 marker", "marker", "marker", "delay:100:50", 6.0, None),
+    ("T3 marker", "marker", "marker", "delay:100", 6.0, 0.15),
+    ("T3 marker", "marker", "marker", "delay:200", 6.0, None),
+    ("T3 marker", "marker", "marker", "delay:200", 6.0, 0.25),
 ]
 
 
@@ -57,10 +76,12 @@ def _one(job: tuple[int, int]) -> tuple[int, str, float | None, float | None, fl
     """One trial: (level, outcome, landing error cm, landing time s, share of the sensor's values dropped,
     share given again)."""
     index, seed = job
-    _, mode, sensor, fault, height = LEVELS[index]
+    _, mode, sensor, fault, height, lag_s = LEVELS[index]
     mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
     environment = replace(mission.environment, wind=replace(mission.environment.wind, **CALM))
     mission = replace(mission, environment=environment)
+    if lag_s is not None:
+        mission = replace(mission, params={**mission.params, "PLND_LAG": lag_s})
     outcome = run_trial(TrialRequest(mission=mission, seed=seed, land_mode=mode,
                                      faults={sensor: fault} if fault else {}, takeoff_altitude_rel_m=height,
                                      record_trajectory=False))
@@ -93,29 +114,41 @@ def main() -> None:
 def report_lines(results: list[tuple], seeds: int) -> list[str]:
     """The printed table: one row a fault."""
     out = [f"fault kinds on the thesis' Table 3 drop scenarios, {seeds} seeds each (the same seeds in every row)",
-           f"{'scenario':<10} {'fault':<14} {'landed':>6} {'mean':>6} {'median':>6} {'sd':>6} {'time s':>6} "
-           f"{'dropped':>7} {'again':>6} {'cost':>6} {'p vs random':>11}"]
-    errors: dict[int, list[float]] = {}
-    for index, (scenario, _, _, fault, _) in enumerate(LEVELS):
+           f"{'scenario':<10} {'fault':<26} {'landed':>6} {'mean':>6} {'median':>6} {'sd':>6} {'time s':>6} "
+           f"{'dropped':>7} {'again':>6} {'cost':>6} {'vs':>6} {'p':>7} {'Holm p':>7}"]
+    errors = {index: [r[2] for r in results if r[0] == index and r[1] == "landed" and r[2] is not None]
+              for index in range(len(LEVELS))}
+    versus: dict[int, int] = {}
+    pvalues: dict[str, float] = {}
+    for index, (scenario, _, _, fault, _, _) in enumerate(LEVELS):
+        if not fault or fault.startswith("random"):
+            continue
+        kind = "none" if fault.startswith("delay") else "random"
+        versus[index] = next(i for i, level in enumerate(LEVELS) if level[0] == scenario and (
+            level[3] is None if kind == "none" else (level[3] or "").startswith("random")))
+        if errors[index] and errors[versus[index]]:
+            pvalues[str(index)] = float(mannwhitneyu(errors[index], errors[versus[index]],
+                                                     alternative="two-sided").pvalue)
+    corrected = holm(pvalues)
+    for index, (scenario, _, _, fault, _, lag_s) in enumerate(LEVELS):
         rows = [r for r in results if r[0] == index]
-        errors[index] = [r[2] for r in rows if r[1] == "landed" and r[2] is not None]
         times = [r[3] for r in rows if r[1] == "landed" and r[3] is not None]
         base = next(i for i, level in enumerate(LEVELS) if level[0] == scenario and level[3] is None)
-        random_level = next(i for i, level in enumerate(LEVELS)
-                            if level[0] == scenario and (level[3] or "").startswith("random"))
         values = errors[index]
         mean = statistics.mean(values) if values else float("nan")
         cost = f"{mean - statistics.mean(errors[base]):>+6.1f}" if fault and errors[base] and values else f"{'':>6}"
-        if fault and not fault.startswith("random") and values and errors[random_level]:
-            p = f"{mannwhitneyu(values, errors[random_level], alternative='two-sided').pvalue:>11.3f}"
+        if str(index) in pvalues:
+            against = "none" if LEVELS[versus[index]][3] is None else "random"
+            tested = f"{against:>6} {pvalues[str(index)]:>7.3f} {corrected[str(index)]:>7.3f}"
         else:
-            p = f"{'':>11}"
-        out.append(f"{scenario:<10} {fault or 'none':<14} {len(values):>3}/{len(rows):<2} {mean:>6.1f} "
+            tested = f"{'':>6} {'':>7} {'':>7}"
+        label = (fault or "none") + (f" (PLND_LAG {lag_s:g})" if lag_s is not None else "")
+        out.append(f"{scenario:<10} {label:<26} {len(values):>3}/{len(rows):<2} {mean:>6.1f} "
                    f"{statistics.median(values) if values else float('nan'):>6.1f} "
                    f"{statistics.stdev(values) if len(values) > 1 else float('nan'):>6.1f} "
                    f"{statistics.mean(times) if times else float('nan'):>6.1f} "
                    f"{statistics.mean(r[4] for r in rows):>7.2f} {statistics.mean(r[5] for r in rows):>6.2f} "
-                   f"{cost} {p}")
+                   f"{cost} {tested}")
     return out
 
 

@@ -77,7 +77,8 @@ class MissionRunner:
         self.sensors = sensors
         # A plugin's readings carry the mission's faults; the built-in modes apply their own.
         faults = spec.land.sensor_faults()
-        self.sensor_faults = SensorFaults(faults=faults, rng=rng.spawn(1)[0]) if faults else None
+        self.sensor_faults = SensorFaults(faults=faults, rng=rng.spawn(1)[0], clock=self.clock) if faults \
+            else None
         self.takeoff_altitude_rel_m = (
             takeoff_altitude_rel_m if takeoff_altitude_rel_m is not None else spec.takeoff_altitude_rel_m()
         )

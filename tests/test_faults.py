@@ -133,7 +133,8 @@ def test_a_stale_fault_repeats_readings_and_the_outcome_records_it():
 @pytest.mark.parametrize("text", ["random", "random:1.5", "periodic:3", "below", "sometimes", "periodic:0:0",
                                   "below:-1", "random:x", "permanent:2", "burst:0.3", "burst:0.3:0.5",
                                   "burst:0.6:1", "burst:1:5", "burst:0.3:inf", "burst:-0.1:3", "stale",
-                                  "stale:1.5", "stale:0.2:3"])
+                                  "stale:1.5", "stale:0.2:3", "delay", "delay:0", "delay:-5", "delay:100:120",
+                                  "delay:100:-1", "delay:1:2:3", "delay:nan", "delay:6000", "delay:100:x"])
 def test_bad_fault_syntax_is_rejected(text):
     with pytest.raises(FaultSyntaxError):
         FaultSpec.parse(text)
@@ -141,8 +142,105 @@ def test_bad_fault_syntax_is_rejected(text):
 
 def test_fault_syntax_round_trips():
     for text in ("none", "random:0.5", "periodic:4:1", "permanent", "below:3", "above:2.5:first-attempt",
-                 "burst:0.3:5", "burst:0.5:2.5:first-attempt", "stale:0.25"):
+                 "burst:0.3:5", "burst:0.5:2.5:first-attempt", "stale:0.25", "delay:120", "delay:100:40",
+                 "delay:60:first-attempt"):
         assert str(FaultSpec.parse(text)) == text
+
+
+def test_a_delay_holds_each_value_back_by_its_drawn_delay_and_keeps_the_order():
+    fixed = _injector("delay:120", seed=2)
+    assert [fixed.arrival_s(t) for t in (1.0, 1.02)] == pytest.approx([1.12, 1.14])
+    jittered = _injector("delay:100:40", seed=2)
+    ready = np.arange(20_000) * 0.02  # 50 Hz, as the IR-LOCK
+    arrivals = np.array([jittered.arrival_s(t) for t in ready])
+    delays = arrivals - ready
+    # Uniform 60..140 ms, except where the value ahead arrives later: then right after it, never before.
+    assert delays.min() >= 0.06 - 1e-12 and delays.max() <= 0.14 + 1e-12 and np.all(np.diff(arrivals) >= 0)
+    # Each arrival is the later of its own (ready + 100 ms + a uniform draw) and the one ahead.
+    drawn_s = ready + (100.0 + np.random.default_rng(2).uniform(-40.0, 40.0, ready.size)) / 1000.0
+    assert arrivals == pytest.approx(np.maximum.accumulate(drawn_s), abs=1e-12)
+    assert 0.100 < delays.mean() < 0.110  # the order adds a little to the drawn mean of 100 ms
+    assert jittered.delayed == 20_000 and jittered.delay_total_s == pytest.approx(delays.sum())
+    again = _injector("delay:100:40", seed=2)
+    assert [again.arrival_s(t) for t in ready[:50]] == list(arrivals[:50])
+    once = _injector("delay:100:first-attempt", seed=2)
+    assert once.arrival_s(3.0, attempt=2) == 3.0 and once.delayed == 0
+
+
+def test_a_reader_at_its_ticks_gets_the_newest_value_that_has_arrived():
+    from preland_app.landing.fault_gate import FaultGate
+
+    gate = FaultGate(faults={"marker": FaultSpec.parse("delay:150")}, sensors=["marker"],
+                     rng=np.random.default_rng(0), streams=["marker"])
+    ticks = [0.0, 0.1, 0.2, 0.3, 0.4]
+    read = [gate.take("marker", f"frame {k}", now_s=t, height_m=None) for k, t in enumerate(ticks)]
+    # Each value arrives 150 ms after its tick: frame 0 at 0.15 is read at 0.2, frame 1 at 0.25 at 0.3.
+    assert read == [None, None, "frame 0", "frame 1", "frame 2"]
+    assert gate.take("marker", None, now_s=0.5, height_m=None) == "frame 3"  # a tick without a value still reads
+    assert gate.take("marker", None, now_s=0.61, height_m=None) == "frame 4"
+    assert gate.take("marker", None, now_s=0.7, height_m=None) is None
+    details = gate.details()
+    assert (details["marker_fault"], details["marker_delayed"], details["marker_delay_mean_ms"],
+            details["marker_superseded"]) == ("delay:150", 5, 150.0, 0)
+    # With jitter, two values can arrive between ticks: the reader gets the newer, the older is passed over.
+    jittery = FaultGate(faults={"irlock": FaultSpec.parse("delay:50:45")}, sensors=["irlock"],
+                        rng=np.random.default_rng(0), streams=["irlock"])
+    read = [jittery.take("irlock", k, now_s=k * 0.02, height_m=None) for k in range(2000)]
+    got = [value for value in read if value is not None]
+    superseded = jittery.details()["irlock_superseded"]
+    assert got == sorted(got) and len(set(got)) == len(got) and superseded > 50
+    # Every value is read, passed over, or still on its way at the last tick (within 95 ms of it).
+    assert 0 <= 2000 - len(got) - superseded <= 5
+
+
+def test_a_delayed_irlock_reaches_the_autopilot_late_in_order_and_the_landing_counts_it():
+    """A precision land mode sends each reading at its own arrival: a LANDING_TARGET leaves 60 to 140 ms after
+    its capture (delay:100:40), in the readings' order, and the outcome counts the delayed values."""
+    from preland_app.clock import LoopClock, run_virtual, wait_until
+    from preland_app.events import EventLog
+    from preland_app.landing.base import LandingContext
+    from preland_app.landing.precision import PrecisionLanding
+    from preland_app.sensing.readings import TargetReading
+    from preland_app.sensing.spec import SensorsSpec
+    from preland_app.sensing.suite import SensorSuite
+    from preland_app.vehicle.fake import FakeVehicle
+    from preland_app.vehicle.types import FlightMode
+
+    async def land() -> tuple[FakeVehicle, dict]:
+        clock = LoopClock()
+        vehicle = FakeVehicle(clock=clock, climb_rate_m_s=3.0, descent_rate_m_s=1.0)
+        await vehicle.connect()
+        await vehicle.set_mode(FlightMode.GUIDED)
+        await vehicle.arm()
+        await vehicle.takeoff(altitude_rel_m=6.0)
+
+        async def up() -> bool:
+            return (await vehicle.telemetry()).altitude_rel_m >= 5.99
+
+        await wait_until(up, clock=clock, timeout_s=30, operation="climb")
+
+        class Beacon:
+            async def next_reading(self) -> TargetReading:
+                await clock.sleep(0.02)
+                return TargetReading(sensor="irlock", capture_time_s=clock.now_s(), angle_x_rad=0.0,
+                                     angle_y_rad=0.0)
+
+        context = LandingContext(vehicle=vehicle, clock=clock, events=EventLog(clock), rng=np.random.default_rng(7),
+                                 timeout_s=60.0, sensors=SensorSuite(spec=SensorsSpec(), irlock=Beacon()))
+        report = await PrecisionLanding("irlock", faults={"irlock": FaultSpec.parse("delay:100:40")}).land(context)
+        return vehicle, report.details
+
+    vehicle, details = run_virtual(land())
+    sent_s = np.array([call.time_s for call in vehicle.calls if call.operation == "send_landing_target"])
+    captured_s = np.array([target.timestamp_s for target in vehicle.landing_targets])
+    ages_s = sent_s - captured_s
+    assert len(sent_s) > 200  # 6 m at 1 m/s, 50 readings a second
+    assert ages_s.min() >= 0.06 - 1e-6 and ages_s.max() <= 0.14 + 1e-6 and 0.095 < ages_s.mean() < 0.11
+    assert np.all(np.diff(captured_s) > 0) and np.all(np.diff(sent_s) >= 0)
+    assert details["irlock_fault"] == "delay:100:40" and details["irlock_dropped"] == 0
+    # Values still on their way at touchdown never arrive: at most 140 ms of them.
+    assert 0 <= details["irlock_delayed"] - details["landing_targets_sent"] <= 7
+    assert 95.0 < details["irlock_delay_mean_ms"] < 110.0
 
 
 # The thesis' Table 1 rules.

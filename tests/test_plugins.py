@@ -324,8 +324,12 @@ def test_a_plugins_views_give_a_stale_value_again_as_the_built_in_modes_do():
     from preland_app.sensing.faults import FaultSpec
     from preland_app.sensing.readings import TargetReading
 
+    class FixedClock:
+        def now_s(self) -> float:
+            return 0.0
+
     faults = SensorFaults(faults={"irlock": FaultSpec.parse("stale:1"), "marker": FaultSpec.parse("stale:1")},
-                          rng=np.random.default_rng(0))
+                          rng=np.random.default_rng(0), clock=FixedClock())
 
     class Beacon:
         def __init__(self) -> None:

@@ -12,6 +12,7 @@ import typer
 from ..errors import PrelandError
 from .app import EXIT_FAILED, app, choices, fail
 from ..landing.registry import LAND_MODES, PRECISION_SENSORS
+from ..sensing.faults import FAULT_SYNTAX
 
 PrecisionSensor = choices(lambda: PRECISION_SENSORS)
 
@@ -127,10 +128,9 @@ def fly(
     sensor: Optional[PrecisionSensor] = typer.Option(None, "--sensor", help="Precision sensor of the cautious "
                                                      "mode."),
     fault: list[str] = typer.Option([], "--fault", metavar="SENSOR=FAULT",
-                                    help="Drop a sensor's values or give its last one again (repeatable, one "
-                                         "per sensor): none, random:P, periodic:KEEP:DROP, permanent, below:H, "
-                                         "above:H, burst:LOSS:LENGTH, stale:P; add :first-attempt "
-                                         "to limit it to the first landing attempt. E.g. marker=below:3."),
+                                    help="Drop a sensor's values, give its last one again or deliver them late "
+                                         f"(repeatable, one per sensor): {FAULT_SYNTAX} (to limit it to the first "
+                                         "landing attempt). E.g. marker=below:3."),
     seed: int = typer.Option(1, "--seed", help="Trial seed: same seed, same outcome."),
     takeoff_altitude_m: Optional[float] = typer.Option(
         None, "--takeoff-altitude-m", help="Take-off altitude above home in m, overriding the mission's."),

@@ -171,11 +171,13 @@ def as_event_view(events: EventLog) -> EventView:
 class SensorFaults:
     """The mission's faults (`land.faults`) applied to the readings a plugin gets, as the built-in modes
     apply them to theirs: per sensor, on each new value, gated on the height above ground the vehicle
-    reports and on the landing attempt (a climb of 0.5 m after the hand-over starts a new one)."""
+    reports and on the landing attempt (a climb of 0.5 m after the hand-over starts a new one); a delayed
+    value reaches the plugin at the first of its reads at or after its arrival on `clock`."""
 
-    def __init__(self, *, faults: Mapping[str, FaultSpec], rng: np.random.Generator) -> None:
+    def __init__(self, *, faults: Mapping[str, FaultSpec], rng: np.random.Generator, clock: Clock) -> None:
         self.gate = FaultGate(faults=faults, sensors=sorted(faults), rng=rng,
                               streams=("irlock", "marker") if faults else ())
+        self.clock = clock
         self.attempts = AttemptTracker()
         self.height_m: float | None = None
         self.landing = False
@@ -186,9 +188,11 @@ class SensorFaults:
         if self.landing:
             self.attempts.update(telemetry.altitude_rel_m)
 
-    def apply(self, sensor: str, value: V) -> V | None:
-        """A new value of `sensor`: what the plugin gets in its place (None: dropped; see `FaultGate.apply`)."""
-        return self.gate.apply(sensor, value, height_m=self.height_m, attempt=self.attempts.attempt)
+    def apply(self, sensor: str, value: V | None) -> V | None:
+        """A read of `sensor` with its new value (None: it has none): what the plugin gets (None: nothing, as
+        when the value was dropped; see `FaultGate.take`)."""
+        return self.gate.take(sensor, value, now_s=self.clock.now_s(), height_m=self.height_m,
+                              attempt=self.attempts.attempt)
 
     def details(self) -> dict[str, Any]:
         """Per sensor: the fault, the values produced and the values dropped (as the built-in modes report)."""
@@ -234,8 +238,8 @@ class DetectorView:
 
     @staticmethod
     def _admitted(detections: list[MarkerDetection], faults: SensorFaults | None) -> list[MarkerDetection]:
-        if detections and faults is not None:
-            return faults.apply("marker", detections) or []
+        if faults is not None:
+            return faults.apply("marker", detections or None) or []
         return detections
 
 
@@ -251,7 +255,7 @@ class IrLockView:
     async def next_reading(self) -> TargetReading | None:
         source, faults = _TARGETS[self]
         reading = await source.next_reading()
-        if reading is not None and faults is not None:
+        if faults is not None:
             return faults.apply("irlock", reading)
         return reading
 

@@ -239,8 +239,9 @@ class PaperLanding:
             # The algorithm's "altitude": height above the ground (rangefinder when in range, else barometer).
             altitude_m = telemetry.height_above_ground_m
             now_s = clock.now_s()
-            if detections:  # a frame with markers is a value: the fault may drop it or give an older one
-                detections = self.gate.apply("marker", detections, height_m=telemetry.height_above_ground_m) or []
+            # A frame with markers is a value: the fault may drop it, give an older one or hold it back.
+            detections = self.gate.take("marker", detections or None, now_s=now_s,
+                                        height_m=telemetry.height_above_ground_m) or []
             if altitude_m <= spec.z1_m:
                 context.events.add("handover", f"below z1 ({spec.z1_m:g} m): LAND", altitude_rel_m=altitude_m)
                 break

@@ -14,9 +14,9 @@ companion (`cautious_retry.py`).
 from __future__ import annotations
 
 import asyncio
-from collections import Counter
+from collections import Counter, deque
 
-from ..clock import wait_until
+from ..clock import join, wait_until
 from ..errors import PrelandError
 from ..sensing.faults import FaultCommand, FaultSpec
 from ..sensing.fusion import FusedSensor
@@ -56,6 +56,8 @@ class PrecisionLanding:
         self._fused: FusedSensor | None = None
         self._height_m: float | None = None
         self._retry: CompanionRetry | None = None
+        self._outbox: deque[tuple[float, TargetReading]] = deque()  # delayed values on their way: (arrival s, value)
+        self._courier: asyncio.Future | None = None
 
     @property
     def attempt(self) -> int:
@@ -120,7 +122,7 @@ class PrecisionLanding:
             context.events.add("land_command", f"LAND with precision landing ({self.name}, {self.sensor}; {faults})")
 
             async def disarmed() -> bool:
-                self._raise_if_failed(tasks)
+                self._raise_if_failed([*tasks, *([self._courier] if self._courier is not None else [])])
                 return not (await vehicle.telemetry()).armed
 
             async def describe() -> str:
@@ -130,9 +132,10 @@ class PrecisionLanding:
             await wait_until(disarmed, clock=clock, timeout_s=context.timeout_s, operation="land",
                              poll_period_s=context.poll_period_s, describe=describe)
         finally:
-            for task in tasks:
+            carriers = [self._courier] if self._courier is not None else []
+            for task in [*tasks, *carriers]:
                 task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
+            await asyncio.gather(*tasks, *carriers, return_exceptions=True)
         context.events.add("disarmed", "landed and disarmed")
         return LandingReport(details=self._details())
 
@@ -167,11 +170,37 @@ class PrecisionLanding:
             await context.clock.sleep(TELEMETRY_PERIOD_S)
 
     async def _deliver(self, context: LandingContext, reading: TargetReading) -> None:
-        """A new sensor value: through the fault injector, then to the fused sensor or the autopilot."""
+        """A new sensor value: through the fault injector, then, when it arrives (a delay fault holds it
+        back), to the fused sensor or the autopilot."""
         if self.gate is not None:
             reading = self.gate.apply(reading.sensor, reading, height_m=self._height_m, attempt=self.attempt)
             if reading is None:
                 return
+            now_s = context.clock.now_s()
+            arrival_s = self.gate.arrival_s(reading.sensor, now_s, attempt=self.attempt)
+            if arrival_s > now_s or self._outbox:
+                self._outbox.append((arrival_s, reading))
+                if self._courier is None or self._courier.done():
+                    if self._courier is not None:
+                        self._raise_if_failed([self._courier])  # not lost under the next courier
+                    self._courier = asyncio.ensure_future(self._carry(context))
+                return
+        await self._hand_on(context, reading)
+
+    async def _carry(self, context: LandingContext) -> None:
+        """Hands the delayed values on at their arrival times, in order, until none is on its way (one task
+        for them all, so two that arrive at the same time keep their order; it reads no sensor but hands
+        values on, so on a lock-step clock time waits for it as for the sensor tasks)."""
+        join(context.clock)
+        while self._outbox:
+            arrival_s, reading = self._outbox[0]
+            wait_s = arrival_s - context.clock.now_s()
+            if wait_s > 0:
+                await context.clock.sleep(wait_s)
+            self._outbox.popleft()
+            await self._hand_on(context, reading)
+
+    async def _hand_on(self, context: LandingContext, reading: TargetReading) -> None:
         if self._fused is not None:
             self._fused.offer(reading)
             return

@@ -1,7 +1,7 @@
 """Fault injection: sensor values dropped on purpose (thesis Chapter 7 and Section 8.2.3).
 
-Faults drop values or give an old one again in a new one's place (never a
-distorted value), and apply per sensor before fusion. Kinds:
+Faults drop values, give an old one again in a new one's place, or deliver
+them late (never a distorted value), and apply per sensor before fusion. Kinds:
 
 * `none`; `random:P` (drop each new value with probability P);
 * `periodic:KEEP:DROP` (keep KEEP values, drop DROP, repeat);
@@ -13,6 +13,9 @@ distorted value), and apply per sensor before fusion. Kinds:
   values is LOSS and whose bursts last LENGTH values on average);
 * `stale:P` (each new value is, with probability P, replaced by the value the
   sensor gave last, sent again as new: a frozen frame or reading);
+* `delay:MS` / `delay:MS:JITTER` (each value arrives MS milliseconds after it
+  was ready, plus a uniform draw in -JITTER..JITTER ms as Linux netem's
+  `delay TIME JITTER`; in order: a value never arrives before the one ahead of it);
 
 each optionally suffixed `:first-attempt` to apply during the first landing
 attempt only (the thesis' Table 5 removes the failure on the second attempt).
@@ -44,20 +47,24 @@ class FaultKind(enum.Enum):
     ABOVE = "above"
     BURST = "burst"
     STALE = "stale"
+    DELAY = "delay"
 
 
 class FaultSyntaxError(ValueError):
     """A fault string that does not parse; the message says what is expected."""
 
 
-FAULT_SYNTAX = ("none, random:P, periodic:KEEP:DROP, permanent, below:H, above:H, burst:LOSS:LENGTH or stale:P, "
-                "optionally with :first-attempt")
+FAULT_SYNTAX = ("none, random:P, periodic:KEEP:DROP, permanent, below:H, above:H, burst:LOSS:LENGTH, stale:P or "
+                "delay:MS[:JITTER], optionally with :first-attempt")
+# A delay beyond this is no longer a late value but a lost one (ArduPilot drops a LANDING_TARGET older than 1 s).
+DELAY_MAX_MS = 5000.0
 
 
 @dataclass(frozen=True)
 class FaultSpec:
     """One sensor's fault. `probability` for random and stale, and the long-run share of values dropped for burst;
-    `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values) for burst."""
+    `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values) for burst;
+    `delay_ms` and `jitter_ms` (milliseconds) for delay."""
 
     kind: FaultKind = FaultKind.NONE
     probability: float = 0.0
@@ -65,6 +72,8 @@ class FaultSpec:
     drop: int = 0
     height_m: float = 0.0
     burst_length: float = 0.0
+    delay_ms: float = 0.0
+    jitter_ms: float = 0.0
     first_attempt_only: bool = False
 
     def __post_init__(self) -> None:
@@ -86,6 +95,13 @@ class FaultSpec:
                 raise FaultSyntaxError(f"burst loss {self.probability:g} cannot last {self.burst_length:g} values "
                                        f"on average: at most {most:.3g} (LENGTH / (1 + LENGTH))")
 
+        if self.kind is FaultKind.DELAY:
+            if not (math.isfinite(self.delay_ms) and 0.0 < self.delay_ms <= DELAY_MAX_MS):
+                raise FaultSyntaxError(f"delay must be within 0..{DELAY_MAX_MS:g} ms and above 0, got {self.delay_ms:g}")
+            if not (math.isfinite(self.jitter_ms) and 0.0 <= self.jitter_ms <= self.delay_ms):
+                raise FaultSyntaxError(f"jitter must be within 0..{self.delay_ms:g} ms (the delay), "
+                                       f"got {self.jitter_ms:g}")
+
     @classmethod
     def parse(cls, text: str) -> "FaultSpec":
         """Parse the CLI/spec syntax (see FAULT_SYNTAX)."""
@@ -99,10 +115,12 @@ class FaultSpec:
             kind = FaultKind(name)
         except ValueError:
             raise FaultSyntaxError(f"unknown fault {text!r} (expected {FAULT_SYNTAX})") from None
-        expected = {FaultKind.NONE: 0, FaultKind.PERMANENT: 0, FaultKind.RANDOM: 1, FaultKind.PERIODIC: 2,
-                     FaultKind.BELOW: 1, FaultKind.ABOVE: 1, FaultKind.BURST: 2, FaultKind.STALE: 1}[kind]
-        if len(args) != expected:
-            raise FaultSyntaxError(f"fault {text!r}: {kind.value} takes {expected} value(s) (expected {FAULT_SYNTAX})")
+        expected = {FaultKind.NONE: (0,), FaultKind.PERMANENT: (0,), FaultKind.RANDOM: (1,), FaultKind.PERIODIC: (2,),
+                    FaultKind.BELOW: (1,), FaultKind.ABOVE: (1,), FaultKind.BURST: (2,), FaultKind.STALE: (1,),
+                    FaultKind.DELAY: (1, 2)}[kind]
+        if len(args) not in expected:
+            counts = " or ".join(map(str, expected))
+            raise FaultSyntaxError(f"fault {text!r}: {kind.value} takes {counts} value(s) (expected {FAULT_SYNTAX})")
         try:
             if kind in (FaultKind.RANDOM, FaultKind.STALE):
                 return cls(kind, probability=float(args[0]), first_attempt_only=first_attempt)
@@ -112,6 +130,9 @@ class FaultSpec:
                 return cls(kind, height_m=float(args[0]), first_attempt_only=first_attempt)
             if kind is FaultKind.BURST:
                 return cls(kind, probability=float(args[0]), burst_length=float(args[1]),
+                           first_attempt_only=first_attempt)
+            if kind is FaultKind.DELAY:
+                return cls(kind, delay_ms=float(args[0]), jitter_ms=float(args[1]) if len(args) > 1 else 0.0,
                            first_attempt_only=first_attempt)
         except ValueError as error:
             if isinstance(error, FaultSyntaxError):
@@ -129,6 +150,7 @@ class FaultSpec:
             FaultKind.ABOVE: f"above:{self.height_m:g}",
             FaultKind.BURST: f"burst:{self.probability:g}:{self.burst_length:g}",
             FaultKind.STALE: f"stale:{self.probability:g}",
+            FaultKind.DELAY: f"delay:{self.delay_ms:g}" + (f":{self.jitter_ms:g}" if self.jitter_ms else ""),
         }[self.kind]
         return text + (f":{FIRST_ATTEMPT_SUFFIX}" if self.first_attempt_only else "")
 
@@ -192,8 +214,8 @@ class FaultCommand:
 
 
 class FaultInjector:
-    """Applies one FaultSpec to a stream of new values from one sensor; counts what it keeps, drops and
-    gives again (stale)."""
+    """Applies one FaultSpec to a stream of new values from one sensor; counts what it keeps, drops, gives
+    again (stale) and delays (delay)."""
 
     def __init__(self, *, sensor: str, spec: FaultSpec, rng: np.random.Generator) -> None:
         self.sensor = sensor
@@ -202,9 +224,12 @@ class FaultInjector:
         self._phase = 0
         self._in_burst: bool | None = None  # the burst channel's state (None: not drawn yet)
         self._last: object | None = None  # the value given out last (a stale fault gives it again)
+        self._last_arrival_s = -math.inf  # when the value ahead arrives (a delay fault keeps the order)
         self.produced = 0
         self.dropped = 0
         self.repeated = 0
+        self.delayed = 0
+        self.delay_total_s = 0.0
 
     def set_spec(self, spec: FaultSpec) -> None:
         """Change the fault at runtime (the fault command); the periodic phase restarts."""
@@ -212,6 +237,7 @@ class FaultInjector:
         self._phase = 0
         self._in_burst = None
         self._last = None
+        self._last_arrival_s = -math.inf
 
     def admit(self, *, height_m: float | None, attempt: int = 1) -> bool:
         """One new value: True to use it, False where the fault drops it or gives an older one instead.
@@ -238,6 +264,21 @@ class FaultInjector:
             return None
         self._last = value
         return value
+
+    def arrival_s(self, ready_s: float, *, attempt: int = 1) -> float:
+        """When a value kept by `apply` and ready at `ready_s` (s, the clock's) arrives: `ready_s` itself
+        unless a delay fault holds it back, then after its drawn delay and never before the value ahead."""
+        spec = self.spec
+        if spec.kind is not FaultKind.DELAY or (spec.first_attempt_only and attempt > 1):
+            return max(ready_s, self._last_arrival_s)
+        delay_ms = spec.delay_ms
+        if spec.jitter_ms:
+            delay_ms += float(self._rng.uniform(-spec.jitter_ms, spec.jitter_ms))
+        arrival_s = max(ready_s + delay_ms / 1000.0, self._last_arrival_s)
+        self._last_arrival_s = arrival_s
+        self.delayed += 1
+        self.delay_total_s += arrival_s - ready_s
+        return arrival_s
 
     def _should_drop(self, spec: FaultSpec, height_m: float | None) -> bool:
         kind = spec.kind
