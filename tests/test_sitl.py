@@ -344,6 +344,20 @@ def test_the_thesis_mission_lands_on_preland_physics_on_real_sitl(thesis_mission
 
 
 @needs_real_sitl
+def test_a_late_irlock_on_real_sitl_still_lands_on_the_beacon(thesis_mission):
+    """Every IR-LOCK reading 400 ms late, in lock-step on preland's physics: ArduCopter 4.6 fuses each with
+    the attitude and position of PLND_LAG (20 ms) before it arrives, yet lands on the beacon, since its
+    velocity loop reads the EKF's velocity, not the precision-landing estimator's (as 3.6/4.0 did)."""
+    outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=3, land_mode="irlock",
+                                          faults={"irlock": "delay:400"}), options=_real(physics="preland"))
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    details = outcome.details
+    assert details["irlock_fault"] == "delay:400" and details["irlock_delay_mean_ms"] == 400.0
+    assert details["landing_targets_sent"] > 500 and details["irlock_dropped"] == 0
+    assert outcome.landing_error_cm < 15.0
+
+
+@needs_real_sitl
 def test_normal_landings_on_real_sitl_miss_by_the_seeds_gps_error(thesis_mission):
     outcomes = [run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed), options=_real())
                 for seed in (1, 2, 3)]
