@@ -1,17 +1,21 @@
 """What the kind of a fault costs beside how much it takes: Table 3's drop scenarios flown with the thesis'
-random drops, with burst drops of the same long-run share, with stale values in the same share, and with
-every value delivered late, on the same seeds.
+random drops, with burst drops of the same long-run share, with stale values in the same share, with
+new values given old times, with every value delivered late, and with false detections among the true ones,
+on the same seeds.
 
 The thesis drops each value on its own (random:P). A burst fault (burst:LOSS:LENGTH, Gilbert's two-state
 channel) drops the same share in runs of LENGTH values on average, as a marker out of view for a few frames
 would; a stale fault (stale:P) drops nothing but gives the last value again in place of a share P of the new
 ones. A delay fault (delay:MS[:JITTER]) drops nothing but delivers each value MS ms late, with ArduPilot's
 default PLND_LAG of 20 ms and, in the rows marked so, with PLND_LAG set to the delay, as ArduPilot's
-precision-landing docs ask of a sensor with a known lag. Per fault: the landing error (mean, median, sd; cm),
-the mean landing time (s), the share of values dropped and the share given again, the cost against the same
-scenario without a fault (difference of means, cm) and a two-sided Mann-Whitney U test of the errors (p)
-against the random fault's at the same share (burst, stale) or against no fault (delay), Holm-corrected over
-the rows of the table.
+precision-landing docs ask of a sensor with a known lag. A false fault (false:P:OFFSET) drops nothing but
+points a share P of the values at a spot OFFSET metres off the target; a stalestamp fault (stalestamp:P) drops
+nothing but gives a share P of the new values the time of the value before (the embedded autopilot, as
+ArduCopter 3.6/4.0, times a value by its arrival). Per fault: the landing error (mean, median, sd; cm), the
+mean landing time (s), the share of values dropped, given again, given an old time and made false, the cost
+against the same scenario without a fault (difference of means, cm) and a two-sided Mann-Whitney U test of
+the errors (p) against the random fault's at the same share (burst, stale) or against no fault (stalestamp,
+delay, false), Holm-corrected over the rows of the table.
 
 IR-LOCK (50 Hz) at random 0.75 against bursts of 5 and 25 readings (0.1 and 0.5 s); the marker (about
 15 frames a second) at random 0.5 against bursts of 3 and 15 frames (0.2 and 1 s). Weather and take-off
@@ -43,13 +47,14 @@ from preland_app.runtime.embedded import TrialRequest, run_trial  # noqa: E402
 CALM = {"speed_m_s": 0.5, "turbulence_w20_m_s": 0.5}
 
 # (scenario, land mode, sensor, fault or None, take-off m, PLND_LAG s or None for the mission's); burst and
-# stale faults are tested against the scenario's random one, delays against no fault.
+# stale faults are tested against the scenario's random one, old times, delays and false targets against no fault.
 LEVELS = [
     ("T3 irlock", "irlock", "irlock", None, 10.0, None),
     ("T3 irlock", "irlock", "irlock", "random:0.75", 10.0, None),
     ("T3 irlock", "irlock", "irlock", "burst:0.75:5", 10.0, None),
     ("T3 irlock", "irlock", "irlock", "burst:0.75:25", 10.0, None),
     ("T3 irlock", "irlock", "irlock", "stale:0.75", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "stalestamp:0.75", 10.0, None),
     ("T3 irlock", "irlock", "irlock", "delay:50", 10.0, None),
     ("T3 irlock", "irlock", "irlock", "delay:100", 10.0, None),
     ("T3 irlock", "irlock", "irlock", "delay:100:50", 10.0, None),
@@ -58,23 +63,29 @@ LEVELS = [
     ("T3 irlock", "irlock", "irlock", "delay:300", 10.0, None),
     ("T3 irlock", "irlock", "irlock", "delay:400", 10.0, None),
     ("T3 irlock", "irlock", "irlock", "delay:400", 10.0, 0.25),
+    ("T3 irlock", "irlock", "irlock", "false:0.1:1", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "false:0.1:3", 10.0, None),
+    ("T3 irlock", "irlock", "irlock", "false:0.3:3", 10.0, None),
     ("T3 marker", "marker", "marker", None, 6.0, None),
     ("T3 marker", "marker", "marker", "random:0.5", 6.0, None),
     ("T3 marker", "marker", "marker", "burst:0.5:3", 6.0, None),
     ("T3 marker", "marker", "marker", "burst:0.5:15", 6.0, None),
     ("T3 marker", "marker", "marker", "stale:0.5", 6.0, None),
+    ("T3 marker", "marker", "marker", "stalestamp:0.5", 6.0, None),
     ("T3 marker", "marker", "marker", "delay:50", 6.0, None),
     ("T3 marker", "marker", "marker", "delay:100", 6.0, None),
     ("T3 marker", "marker", "marker", "delay:100:50", 6.0, None),
     ("T3 marker", "marker", "marker", "delay:100", 6.0, 0.15),
     ("T3 marker", "marker", "marker", "delay:200", 6.0, None),
     ("T3 marker", "marker", "marker", "delay:200", 6.0, 0.25),
+    ("T3 marker", "marker", "marker", "false:0.1:1", 6.0, None),
+    ("T3 marker", "marker", "marker", "false:0.3:1", 6.0, None),
 ]
 
 
-def _one(job: tuple[int, int]) -> tuple[int, str, float | None, float | None, float, float]:
+def _one(job: tuple[int, int]) -> tuple[int, str, float | None, float | None, float, float, float, float]:
     """One trial: (level, outcome, landing error cm, landing time s, share of the sensor's values dropped,
-    share given again)."""
+    share given again, share given an old time, share made false)."""
     index, seed = job
     _, mode, sensor, fault, height, lag_s = LEVELS[index]
     mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
@@ -88,8 +99,10 @@ def _one(job: tuple[int, int]) -> tuple[int, str, float | None, float | None, fl
     produced = outcome.details.get(f"{sensor}_produced", 0)
     dropped = outcome.details.get(f"{sensor}_dropped", 0)
     repeated = outcome.details.get(f"{sensor}_repeated", 0)
+    old_stamp = outcome.details.get(f"{sensor}_old_stamp", 0)
+    false = outcome.details.get(f"{sensor}_false", 0)
     return (index, outcome.outcome.value, outcome.landing_error_cm, outcome.landing_time_s,
-            dropped / produced if produced else 0.0, repeated / produced if produced else 0.0)
+            *(count / produced if produced else 0.0 for count in (dropped, repeated, old_stamp, false)))
 
 
 def _init_worker() -> None:
@@ -115,7 +128,7 @@ def report_lines(results: list[tuple], seeds: int) -> list[str]:
     """The printed table: one row a fault."""
     out = [f"fault kinds on the thesis' Table 3 drop scenarios, {seeds} seeds each (the same seeds in every row)",
            f"{'scenario':<10} {'fault':<26} {'landed':>6} {'mean':>6} {'median':>6} {'sd':>6} {'time s':>6} "
-           f"{'dropped':>7} {'again':>6} {'cost':>6} {'vs':>6} {'p':>7} {'Holm p':>7}"]
+           f"{'dropped':>7} {'again':>6} {'old t':>6} {'false':>6} {'cost':>6} {'vs':>6} {'p':>7} {'Holm p':>7}"]
     errors = {index: [r[2] for r in results if r[0] == index and r[1] == "landed" and r[2] is not None]
               for index in range(len(LEVELS))}
     versus: dict[int, int] = {}
@@ -123,7 +136,7 @@ def report_lines(results: list[tuple], seeds: int) -> list[str]:
     for index, (scenario, _, _, fault, _, _) in enumerate(LEVELS):
         if not fault or fault.startswith("random"):
             continue
-        kind = "none" if fault.startswith("delay") else "random"
+        kind = "none" if fault.startswith(("delay", "false", "stalestamp")) else "random"
         versus[index] = next(i for i, level in enumerate(LEVELS) if level[0] == scenario and (
             level[3] is None if kind == "none" else (level[3] or "").startswith("random")))
         if errors[index] and errors[versus[index]]:
@@ -148,6 +161,7 @@ def report_lines(results: list[tuple], seeds: int) -> list[str]:
                    f"{statistics.stdev(values) if len(values) > 1 else float('nan'):>6.1f} "
                    f"{statistics.mean(times) if times else float('nan'):>6.1f} "
                    f"{statistics.mean(r[4] for r in rows):>7.2f} {statistics.mean(r[5] for r in rows):>6.2f} "
+                   f"{statistics.mean(r[6] for r in rows):>6.2f} {statistics.mean(r[7] for r in rows):>6.2f} "
                    f"{cost} {tested}")
     return out
 

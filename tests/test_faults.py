@@ -1,5 +1,7 @@
 """Fault models, the thesis' fault command, and the CLI/spec fault syntax."""
 
+import math
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -134,7 +136,10 @@ def test_a_stale_fault_repeats_readings_and_the_outcome_records_it():
                                   "below:-1", "random:x", "permanent:2", "burst:0.3", "burst:0.3:0.5",
                                   "burst:0.6:1", "burst:1:5", "burst:0.3:inf", "burst:-0.1:3", "stale",
                                   "stale:1.5", "stale:0.2:3", "delay", "delay:0", "delay:-5", "delay:100:120",
-                                  "delay:100:-1", "delay:1:2:3", "delay:nan", "delay:6000", "delay:100:x"])
+                                  "delay:100:-1", "delay:1:2:3", "delay:nan", "delay:6000", "delay:100:x",
+                                  "false", "false:0.5", "false:0.5:0", "false:0.5:-1", "false:0.5:60",
+                                  "false:1.5:2", "false:0.5:nan", "false:0.1:2:3", "stalestamp",
+                                  "stalestamp:2", "stalestamp:0.5:1"])
 def test_bad_fault_syntax_is_rejected(text):
     with pytest.raises(FaultSyntaxError):
         FaultSpec.parse(text)
@@ -143,7 +148,8 @@ def test_bad_fault_syntax_is_rejected(text):
 def test_fault_syntax_round_trips():
     for text in ("none", "random:0.5", "periodic:4:1", "permanent", "below:3", "above:2.5:first-attempt",
                  "burst:0.3:5", "burst:0.5:2.5:first-attempt", "stale:0.25", "delay:120", "delay:100:40",
-                 "delay:60:first-attempt"):
+                 "delay:60:first-attempt", "false:0.1:3", "false:0.25:0.5:first-attempt",
+                 "stalestamp:0.3", "stalestamp:1:first-attempt"):
         assert str(FaultSpec.parse(text)) == text
 
 
@@ -241,6 +247,98 @@ def test_a_delayed_irlock_reaches_the_autopilot_late_in_order_and_the_landing_co
     # Values still on their way at touchdown never arrive: at most 140 ms of them.
     assert 0 <= details["irlock_delayed"] - details["landing_targets_sent"] <= 7
     assert 95.0 < details["irlock_delay_mean_ms"] < 110.0
+
+
+def test_stalestamp_gives_new_readings_the_time_of_the_one_before_in_the_asked_share():
+    from preland_app.sensing.readings import TargetReading
+
+    injector = _injector("stalestamp:0.3", seed=5)
+    readings = [TargetReading(sensor="irlock", capture_time_s=0.02 * k, angle_x_rad=0.001 * k, angle_y_rad=0.0)
+                for k in range(5000)]
+    given = [injector.apply(reading, height_m=5.0) for reading in readings]
+    old = [k for k, (reading, out) in enumerate(zip(readings, given)) if out.capture_time_s != reading.capture_time_s]
+    assert injector.old_stamped == len(old) and injector.dropped == injector.repeated == 0
+    assert len(old) / 5000 == pytest.approx(0.3, abs=0.02)
+    # The value is the new one's; its time is the one given before it (a frozen clock stays frozen).
+    assert all(out.angle_x_rad == reading.angle_x_rad for reading, out in zip(readings, given))
+    assert all(given[k].capture_time_s == given[k - 1].capture_time_s for k in old) and 0 not in old
+    # A value without a time (a frame's marker detections) passes as it is.
+    frames = _injector("stalestamp:1", sensor="marker")
+    assert frames.apply(["a"], height_m=5.0) == ["a"] and frames.apply(["b"], height_m=5.0) == ["b"]
+    assert frames.old_stamped == 0
+
+
+def test_a_stalestamp_irlock_flies_and_a_stalestamp_marker_is_refused_where_detections_carry_no_time():
+    import preland_app as preland
+    from preland_app.errors import SpecError
+
+    mission = preland.load_mission(THESIS_MISSION)
+    outcome = preland.fly(mission, seed=3, land="irlock", faults={"irlock": "stalestamp:0.5"},
+                          record_trajectory=False)
+    assert outcome.outcome is preland.Outcome.LANDED and outcome.landing_error_cm < 15.0
+    details = outcome.details
+    assert details["irlock_fault"] == "stalestamp:0.5" and details["irlock_dropped"] == 0
+    assert 0.4 < details["irlock_old_stamp"] / details["irlock_produced"] < 0.6
+    with pytest.raises(SpecError, match="faults.marker.*carry no time"):
+        preland.fly(mission, seed=3, land="paper_adaptive", faults={"marker": "stalestamp:0.5"})
+
+
+def test_a_false_fault_points_the_asked_share_of_readings_at_one_spot_off_the_target():
+    """false:0.2:3: a fifth of the readings point 3 m from the target on the ground, always at the same spot
+    (a reflection stays where it is); the others are the readings themselves."""
+    from preland_app.sensing.readings import TargetReading
+
+    injector = _injector("false:0.2:3", seed=11)
+    height_m = 6.0
+    spots = []
+    for k in range(5000):
+        # The target seen 0.5 m right of and 0.25 m behind the camera's axis, with and without a range.
+        reading = TargetReading(sensor="irlock", capture_time_s=0.02 * k, angle_x_rad=math.atan(0.5 / height_m),
+                                angle_y_rad=math.atan(0.25 / height_m),
+                                distance_m=math.sqrt(0.5**2 + 0.25**2 + height_m**2) if k % 2 else None)
+        given = injector.apply(reading, height_m=height_m)
+        assert given.capture_time_s == reading.capture_time_s
+        if given == reading:
+            continue
+        x_m, y_m = height_m * math.tan(given.angle_x_rad), height_m * math.tan(given.angle_y_rad)
+        if given.distance_m is not None:
+            assert given.distance_m == pytest.approx(math.sqrt(x_m**2 + y_m**2 + height_m**2))
+        spots.append((x_m - 0.5, y_m - 0.25))
+    spots = np.array(spots)
+    assert injector.falsified == len(spots) and injector.dropped == 0 and injector.produced == 5000
+    assert len(spots) / 5000 == pytest.approx(0.2, abs=0.02)
+    assert np.allclose(np.hypot(spots[:, 0], spots[:, 1]), 3.0) and np.allclose(spots, spots[0])
+    # Without a range or a height a reading cannot be put on the ground: it passes as it is.
+    blind = _injector("false:1:3")
+    reading = TargetReading(sensor="irlock", capture_time_s=0.0, angle_x_rad=0.1, angle_y_rad=0.0)
+    assert blind.apply(reading, height_m=None) == reading and blind.falsified == 0
+
+
+def test_a_false_marker_detection_moves_the_pose_and_the_pad_centre():
+    from preland_app.sensing.marker import MarkerDetection
+
+    detection = MarkerDetection(marker_id=7, side_m=0.2, corners_px=np.zeros((4, 2)), rvec=np.zeros(3),
+                                tvec=np.array([0.1, -0.2, 4.0]), pad_center_cam_m=np.array([0.15, -0.2, 4.0]))
+    injector = _injector("false:1:2", seed=3, sensor="marker")
+    (moved,) = injector.apply([detection], height_m=4.0)
+    shift = moved.tvec - detection.tvec
+    assert np.allclose(moved.pad_center_cam_m - detection.pad_center_cam_m, shift)
+    assert shift[2] == 0.0 and math.hypot(shift[0], shift[1]) == pytest.approx(2.0)
+    assert moved.marker_id == 7 and injector.falsified == 1
+
+
+@pytest.mark.parametrize("land, seed", [("irlock", 3), ("marker", 4)])
+def test_false_detections_among_true_ones_are_refused_by_the_autopilot_and_it_lands_on_the_pad(land, seed):
+    """One reading in ten points 3 m off the pad: AC_PrecLand's outlier gate refuses them (a false one is
+    fused only after three refused in a row), so the vehicle lands on the pad; the outcome counts them."""
+    import preland_app as preland
+
+    mission = preland.load_mission(THESIS_MISSION)
+    outcome = preland.fly(mission, seed=seed, land=land, faults={land: "false:0.1:3"}, record_trajectory=False)
+    assert outcome.outcome is preland.Outcome.LANDED and outcome.landing_error_cm < 20.0
+    details = outcome.details
+    assert details[f"{land}_fault"] == "false:0.1:3" and details[f"{land}_dropped"] == 0
+    assert 0.05 < details[f"{land}_false"] / details[f"{land}_produced"] < 0.15
 
 
 # The thesis' Table 1 rules.

@@ -59,11 +59,13 @@ class ServedSimulator:
 
 @pytest.mark.parametrize("mode, paced, faults", [("normal", False, {}), ("irlock", True, {"irlock": "burst:0.3:10"}),
                                                  ("irlock", True, {"irlock": "stale:0.3"}),
-                                                 ("irlock", True, {"irlock": "delay:100:40"})])
+                                                 ("irlock", True, {"irlock": "delay:100:40"}),
+                                                 ("irlock", True, {"irlock": "false:0.1:3"}),
+                                                 ("irlock", True, {"irlock": "stalestamp:0.3"})])
 def test_thesis_mission_over_mavlink(thesis_mission, mode, paced, faults):
     # GPS alone follows the vehicle's clock, as on SITL and a drone; the IR-LOCK's 50 Hz readings fly in
     # lock-step, each at its vehicle time however loaded the machine is, and lose some in bursts on the way,
-    # are given again, or reach the vehicle late.
+    # are given again, reach the vehicle late, point 3 m off the beacon, or carry the time of the one before.
     served = ServedSimulator(thesis_mission, seed=4, paced=paced)
     try:
         request = TrialRequest(mission=thesis_mission, seed=4, land_mode=mode, faults=faults)
@@ -91,6 +93,14 @@ def test_thesis_mission_over_mavlink(thesis_mission, mode, paced, faults):
             assert details["irlock_dropped"] == 0 and 100.0 <= details["irlock_delay_mean_ms"] < 115.0
             assert served.face.landing_targets == details["landing_targets_sent"]
             assert 0 <= details["irlock_produced"] - served.face.landing_targets <= 7
+        elif "stalestamp" in faults["irlock"]:
+            # Every reading is sent, about 3 in 10 with the time of the one before.
+            assert details["irlock_dropped"] == 0 and 0.2 < details["irlock_old_stamp"] / details["irlock_produced"] < 0.4
+            assert served.face.landing_targets == details["irlock_produced"]
+        elif "false" in faults["irlock"]:
+            # Every reading is sent, a tenth of them pointing 3 m off; the autopilot refuses those.
+            assert details["irlock_dropped"] == 0 and 0.05 < details["irlock_false"] / details["irlock_produced"] < 0.15
+            assert served.face.landing_targets == details["irlock_produced"]
         else:
             changed = details["irlock_repeated"] if "stale" in faults["irlock"] else details["irlock_dropped"]
             assert 0.15 < changed / details["irlock_produced"] < 0.45

@@ -3,9 +3,11 @@
 import math
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from preland_app.sensing.spec import MarkerSensorSpec
+from preland_app.sensing.virtual_camera import rotation_ned_from_body
 
 from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
@@ -60,13 +62,14 @@ def _companion_pointing(offset_north_m, offset_east_m, *, enable, stop_below_m=N
             truth = simulator.true_pose()
             height = -truth.down_m
             if stop_below_m is None or height > stop_below_m:
-                # Line of sight from the true pose (body = NED rotated by yaw; level enough here).
-                dn, de = offset_north_m - truth.north_m, offset_east_m - truth.east_m
-                c, s = math.cos(truth.yaw_rad), math.sin(truth.yaw_rad)
-                forward, right = dn * c + de * s, -dn * s + de * c
+                # Line of sight from the true pose, in the body frame (a tilt of 10 degrees at 8 m moves the
+                # target 1.4 m: the autopilot's outlier gate refuses a line of sight that leaves the tilt out).
+                line_ned = np.array([offset_north_m - truth.north_m, offset_east_m - truth.east_m, height])
+                forward, right, down = rotation_ned_from_body(truth.roll_rad, truth.pitch_rad,
+                                                              truth.yaw_rad).T @ line_ned
                 await vehicle.send_landing_target(LandingTarget(
-                    timestamp_s=clock.now_s(), angle_x_rad=math.atan2(right, max(height, 0.1)),
-                    angle_y_rad=math.atan2(-forward, max(height, 0.1))))
+                    timestamp_s=clock.now_s(), angle_x_rad=math.atan2(right, max(down, 0.1)),
+                    angle_y_rad=math.atan2(-forward, max(down, 0.1))))
             await clock.sleep(0.05)
         return simulator.touchdowns()[-1], simulator.autopilot.messages
 
@@ -133,3 +136,45 @@ def test_the_marker_trial_whose_pose_fit_came_back_nan_now_lands():
     outcome = run_trial(TrialRequest(mission=scenario.mission, seed=151972701,
                                      takeoff_altitude_rel_m=scenario.takeoff_altitude_rel_m, record_trajectory=False))
     assert outcome.outcome is Outcome.LANDED and outcome.landing_error_cm < 15.0
+
+
+def test_an_outlier_is_refused_until_three_in_a_row_were_refused():
+    """AC_PrecLand's gate: a measurement whose NIS is 3 or more on an axis is not fused, and the fourth such
+    measurement in a row is (a target that really moved is followed); the raw estimator has no gate."""
+    from preland_app.sim.params import ParameterTable
+    from preland_app.sim.precland import PrecisionLandingEstimator
+    from preland_app.vehicle.types import LandingTarget
+
+    def estimator_at_rest(params: ParameterTable) -> PrecisionLandingEstimator:
+        estimator = PrecisionLandingEstimator(params)
+        for k in range(40):
+            estimator.record_pose(0.02 * k, north_m=0.0, east_m=0.0, height_m=5.0, roll_rad=0.0, pitch_rad=0.0,
+                                  yaw_rad=0.0)
+        return estimator
+
+    def target(time_s: float, east_m: float) -> LandingTarget:
+        return LandingTarget(timestamp_s=time_s, angle_x_rad=math.atan2(east_m, 5.0), angle_y_rad=0.0,
+                             distance_m=None)
+
+    estimator = estimator_at_rest(ParameterTable())
+    for k in range(10):
+        assert estimator.handle(0.4 + 0.02 * k, target(0.4 + 0.02 * k, 0.5)) is True
+    _, east_before = estimator.relative_position_m(0.6)
+    # 2 m off, four times in a row: three refused, the fourth fused.
+    results = [estimator.handle(0.62 + 0.02 * k, target(0.62 + 0.02 * k, 2.5)) for k in range(4)]
+    assert results == [False, False, False, True] and estimator.measurements_rejected == 3
+    _, east_after = estimator.relative_position_m(0.7)
+    assert east_before == pytest.approx(0.5, abs=0.01) and 0.6 < east_after < 2.5  # fused: moved towards it
+    # One outlier between good measurements is refused and leaves the estimate where it was.
+    estimator = estimator_at_rest(ParameterTable())
+    for k in range(10):
+        estimator.handle(0.4 + 0.02 * k, target(0.4 + 0.02 * k, 0.5))
+    assert estimator.handle(0.62, target(0.62, 2.5)) is False
+    assert estimator.handle(0.64, target(0.64, 0.5)) is True
+    assert estimator.relative_position_m(0.64)[1] == pytest.approx(0.5, abs=0.01)
+    # PLND_EST_TYPE=0: no gate.
+    raw = estimator_at_rest(ParameterTable({"PLND_EST_TYPE": 0}))
+    for k in range(10):
+        raw.handle(0.4 + 0.02 * k, target(0.4 + 0.02 * k, 0.5))
+    assert raw.handle(0.62, target(0.62, 2.5)) is True and raw.measurements_rejected == 0
+    assert raw.relative_position_m(0.62)[1] == pytest.approx(2.5, abs=0.01)

@@ -358,6 +358,35 @@ def test_a_late_irlock_on_real_sitl_still_lands_on_the_beacon(thesis_mission):
 
 
 @needs_real_sitl
+def test_false_irlock_readings_on_real_sitl_are_refused_and_it_lands_on_the_beacon(thesis_mission):
+    """One IR-LOCK reading in ten points 3 m off the beacon, in lock-step on preland's physics: ArduCopter 4.6's
+    outlier gate refuses them (a false one is fused only after three refused in a row), so it lands on the
+    beacon, as the embedded autopilot does."""
+    outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=3, land_mode="irlock",
+                                          faults={"irlock": "false:0.1:3"}), options=_real(physics="preland"))
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    details = outcome.details
+    assert details["irlock_fault"] == "false:0.1:3" and details["irlock_dropped"] == 0
+    assert 0.05 < details["irlock_false"] / details["irlock_produced"] < 0.15
+    assert details["landing_targets_sent"] > 500
+    assert outcome.landing_error_cm < 15.0
+
+
+@needs_real_sitl
+def test_irlock_readings_with_old_times_on_real_sitl_still_land_on_the_beacon(thesis_mission):
+    """Half the IR-LOCK readings carry the time of the reading before, in lock-step on preland's physics.
+    ArduCopter 4.6 takes a LANDING_TARGET whose (corrected) time equals the last one's as no new measurement
+    (AC_PrecLand::retrieve_los_meas), so those are lost to it, as drops would be; it still lands on the beacon."""
+    outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=3, land_mode="irlock",
+                                          faults={"irlock": "stalestamp:0.5"}), options=_real(physics="preland"))
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    details = outcome.details
+    assert details["irlock_fault"] == "stalestamp:0.5" and details["irlock_dropped"] == 0
+    assert 0.4 < details["irlock_old_stamp"] / details["irlock_produced"] < 0.6
+    assert outcome.landing_error_cm < 15.0
+
+
+@needs_real_sitl
 def test_normal_landings_on_real_sitl_miss_by_the_seeds_gps_error(thesis_mission):
     outcomes = [run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed), options=_real())
                 for seed in (1, 2, 3)]

@@ -20,10 +20,11 @@ from ..landing.base import LandStrategy
 from ..landing.cautious import CautiousSpec
 from ..landing.paper import PaperSpec
 from ..landing.plugins import LandModeError, precision_sensor_of
+from ..landing.precision import PrecisionLanding
 from ..landing.registry import LAND_MODES, PRECISION_SENSORS, create_land_strategy, find_land_mode, is_land_mode_name, \
     land_mode_names
 from ..sensing.faults import SENSORS as FAULT_SENSORS
-from ..sensing.faults import FaultSpec, FaultSyntaxError
+from ..sensing.faults import FaultKind, FaultSpec, FaultSyntaxError
 from ..sim.params import ARDUCOPTER_PARAMS
 from ..sensing.pad import PAD_PRESETS, PadSpec, load_pad
 from ..sensing.spec import SensorsSpec
@@ -150,11 +151,17 @@ class LandSpec:
                 raise SpecValueError(f"faults.{sensor}", str(error)) from None
         # Make the strategy once now: a plugin that cannot be imported, or refuses its options, is reported
         # when the file loads. What it uses decides its sensor and which faults apply.
-        sensor = precision_sensor_of(self._make_strategy())
+        strategy = self._make_strategy()
+        sensor = precision_sensor_of(strategy)
         used = {None: (), "irlock": ("irlock",), "marker": ("marker",), "fused": ("irlock", "marker")}[sensor]
-        for sensor_name in self.faults:
+        for sensor_name, text in self.faults.items():
             require(sensor_name in used, f"faults.{sensor_name}",
                     f"land mode {self.mode!r} does not use the {sensor_name} sensor")
+            # A marker's detections carry no time of their own; only the precision modes send them with one.
+            require(sensor_name != "marker" or FaultSpec.parse(text).kind is not FaultKind.STALESTAMP
+                    or isinstance(strategy, PrecisionLanding), f"faults.{sensor_name}",
+                    f"land mode {self.mode!r} reads the marker's detections, which carry no time for stalestamp "
+                    "to make old (the precision modes send them with one)")
         object.__setattr__(self, "_precision_sensor", sensor)
         object.__setattr__(self, "_builtin", builtin)
 

@@ -1,8 +1,8 @@
 """The faults of a landing applied to each new sensor value: one mechanism for every land mode.
 
 The built-in precision modes, the paper's algorithms and a plugin's sensor views all pass their values
-through a `FaultGate`, which drops a value, gives the sensor's last value again in its place, or holds it
-back until it arrives: one `FaultInjector` per sensor the mode uses, each drawing from a random stream of
+through a `FaultGate`, which drops a value, gives the sensor's last value again in its place, gives it an old
+time, puts a false target in its place, or holds it back until it arrives: one `FaultInjector` per sensor the mode uses, each drawing from a random stream of
 its own (spawned from the landing's generator in the order `streams` gives, so a mode's draws do not depend
 on the other sensor's), gated on the height above ground the vehicle reports and on the landing attempt.
 
@@ -79,7 +79,8 @@ class FaultGate:
 
     def details(self) -> dict[str, Any]:
         """Per sensor: its fault, the values produced, the values dropped; under a stale fault the values
-        given again; under a delay fault the values delayed, their mean delay (ms) and those a reader at its
+        given again; under a stalestamp fault the values sent with an old time; under a false fault the values replaced by the false target; under a delay fault the values
+        delayed, their mean delay (ms) and those a reader at its
         ticks passed over."""
         details: dict[str, Any] = {}
         for sensor, injector in sorted(self.injectors.items()):
@@ -88,6 +89,10 @@ class FaultGate:
             details[f"{sensor}_dropped"] = injector.dropped
             if injector.repeated or injector.spec.kind is FaultKind.STALE:
                 details[f"{sensor}_repeated"] = injector.repeated
+            if injector.old_stamped or injector.spec.kind is FaultKind.STALESTAMP:
+                details[f"{sensor}_old_stamp"] = injector.old_stamped
+            if injector.falsified or injector.spec.kind is FaultKind.FALSE:
+                details[f"{sensor}_false"] = injector.falsified
             if injector.delayed or injector.spec.kind is FaultKind.DELAY:
                 details[f"{sensor}_delayed"] = injector.delayed
                 details[f"{sensor}_delay_mean_ms"] = round(1000.0 * injector.delay_total_s / injector.delayed, 1) \

@@ -1,7 +1,8 @@
 """Fault injection: sensor values dropped on purpose (thesis Chapter 7 and Section 8.2.3).
 
-Faults drop values, give an old one again in a new one's place, or deliver
-them late (never a distorted value), and apply per sensor before fusion. Kinds:
+Faults drop values, give an old one again in a new one's place, deliver them
+late, or put a false target in a value's place (never noise on a value), and
+apply per sensor before fusion. Kinds:
 
 * `none`; `random:P` (drop each new value with probability P);
 * `periodic:KEEP:DROP` (keep KEEP values, drop DROP, repeat);
@@ -13,9 +14,15 @@ them late (never a distorted value), and apply per sensor before fusion. Kinds:
   values is LOSS and whose bursts last LENGTH values on average);
 * `stale:P` (each new value is, with probability P, replaced by the value the
   sensor gave last, sent again as new: a frozen frame or reading);
+* `stalestamp:P` (each new value is, with probability P, given the capture time
+  of the value given before it: a new reading with an old timestamp, as from a
+  driver whose frame time does not advance; for readings that carry a time);
 * `delay:MS` / `delay:MS:JITTER` (each value arrives MS milliseconds after it
   was ready, plus a uniform draw in -JITTER..JITTER ms as Linux netem's
   `delay TIME JITTER`; in order: a value never arrives before the one ahead of it);
+* `false:P:OFFSET` (each new value is, with probability P, replaced by a
+  detection of a false target OFFSET metres from the real one on the ground, in
+  a direction drawn once a trial: a reflection, a sunlit object, a look-alike);
 
 each optionally suffixed `:first-attempt` to apply during the first landing
 attempt only (the thesis' Table 5 removes the failure on the second attempt).
@@ -28,7 +35,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -47,24 +54,27 @@ class FaultKind(enum.Enum):
     ABOVE = "above"
     BURST = "burst"
     STALE = "stale"
+    STALESTAMP = "stalestamp"
     DELAY = "delay"
+    FALSE = "false"
 
 
 class FaultSyntaxError(ValueError):
     """A fault string that does not parse; the message says what is expected."""
 
 
-FAULT_SYNTAX = ("none, random:P, periodic:KEEP:DROP, permanent, below:H, above:H, burst:LOSS:LENGTH, stale:P or "
-                "delay:MS[:JITTER], optionally with :first-attempt")
+FAULT_SYNTAX = ("none, random:P, periodic:KEEP:DROP, permanent, below:H, above:H, burst:LOSS:LENGTH, stale:P, "
+                "stalestamp:P, delay:MS[:JITTER] or false:P:OFFSET, optionally with :first-attempt")
 # A delay beyond this is no longer a late value but a lost one (ArduPilot drops a LANDING_TARGET older than 1 s).
 DELAY_MAX_MS = 5000.0
+FALSE_OFFSET_MAX_M = 50.0  # farther, and a downward camera at landing heights would not see it
 
 
 @dataclass(frozen=True)
 class FaultSpec:
-    """One sensor's fault. `probability` for random and stale, and the long-run share of values dropped for burst;
+    """One sensor's fault. `probability` for random, stale and stalestamp, and the long-run share of values dropped for burst;
     `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values) for burst;
-    `delay_ms` and `jitter_ms` (milliseconds) for delay."""
+    `delay_ms` and `jitter_ms` (milliseconds) for delay; `probability` and `offset_m` for false."""
 
     kind: FaultKind = FaultKind.NONE
     probability: float = 0.0
@@ -74,6 +84,7 @@ class FaultSpec:
     burst_length: float = 0.0
     delay_ms: float = 0.0
     jitter_ms: float = 0.0
+    offset_m: float = 0.0
     first_attempt_only: bool = False
 
     def __post_init__(self) -> None:
@@ -102,6 +113,11 @@ class FaultSpec:
                 raise FaultSyntaxError(f"jitter must be within 0..{self.delay_ms:g} ms (the delay), "
                                        f"got {self.jitter_ms:g}")
 
+        if self.kind is FaultKind.FALSE and not (math.isfinite(self.offset_m) and
+                                                 0.0 < self.offset_m <= FALSE_OFFSET_MAX_M):
+            raise FaultSyntaxError(f"false target offset must be within 0..{FALSE_OFFSET_MAX_M:g} m and above 0, "
+                                   f"got {self.offset_m:g}")
+
     @classmethod
     def parse(cls, text: str) -> "FaultSpec":
         """Parse the CLI/spec syntax (see FAULT_SYNTAX)."""
@@ -117,12 +133,12 @@ class FaultSpec:
             raise FaultSyntaxError(f"unknown fault {text!r} (expected {FAULT_SYNTAX})") from None
         expected = {FaultKind.NONE: (0,), FaultKind.PERMANENT: (0,), FaultKind.RANDOM: (1,), FaultKind.PERIODIC: (2,),
                     FaultKind.BELOW: (1,), FaultKind.ABOVE: (1,), FaultKind.BURST: (2,), FaultKind.STALE: (1,),
-                    FaultKind.DELAY: (1, 2)}[kind]
+                    FaultKind.STALESTAMP: (1,), FaultKind.DELAY: (1, 2), FaultKind.FALSE: (2,)}[kind]
         if len(args) not in expected:
             counts = " or ".join(map(str, expected))
             raise FaultSyntaxError(f"fault {text!r}: {kind.value} takes {counts} value(s) (expected {FAULT_SYNTAX})")
         try:
-            if kind in (FaultKind.RANDOM, FaultKind.STALE):
+            if kind in (FaultKind.RANDOM, FaultKind.STALE, FaultKind.STALESTAMP):
                 return cls(kind, probability=float(args[0]), first_attempt_only=first_attempt)
             if kind is FaultKind.PERIODIC:
                 return cls(kind, keep=int(args[0]), drop=int(args[1]), first_attempt_only=first_attempt)
@@ -131,6 +147,8 @@ class FaultSpec:
             if kind is FaultKind.BURST:
                 return cls(kind, probability=float(args[0]), burst_length=float(args[1]),
                            first_attempt_only=first_attempt)
+            if kind is FaultKind.FALSE:
+                return cls(kind, probability=float(args[0]), offset_m=float(args[1]), first_attempt_only=first_attempt)
             if kind is FaultKind.DELAY:
                 return cls(kind, delay_ms=float(args[0]), jitter_ms=float(args[1]) if len(args) > 1 else 0.0,
                            first_attempt_only=first_attempt)
@@ -150,6 +168,8 @@ class FaultSpec:
             FaultKind.ABOVE: f"above:{self.height_m:g}",
             FaultKind.BURST: f"burst:{self.probability:g}:{self.burst_length:g}",
             FaultKind.STALE: f"stale:{self.probability:g}",
+            FaultKind.STALESTAMP: f"stalestamp:{self.probability:g}",
+            FaultKind.FALSE: f"false:{self.probability:g}:{self.offset_m:g}",
             FaultKind.DELAY: f"delay:{self.delay_ms:g}" + (f":{self.jitter_ms:g}" if self.jitter_ms else ""),
         }[self.kind]
         return text + (f":{FIRST_ATTEMPT_SUFFIX}" if self.first_attempt_only else "")
@@ -215,7 +235,7 @@ class FaultCommand:
 
 class FaultInjector:
     """Applies one FaultSpec to a stream of new values from one sensor; counts what it keeps, drops, gives
-    again (stale) and delays (delay)."""
+    again (stale), gives an old time (stalestamp), delays (delay) and replaces with a false target (false)."""
 
     def __init__(self, *, sensor: str, spec: FaultSpec, rng: np.random.Generator) -> None:
         self.sensor = sensor
@@ -230,6 +250,9 @@ class FaultInjector:
         self.repeated = 0
         self.delayed = 0
         self.delay_total_s = 0.0
+        self.falsified = 0
+        self.old_stamped = 0
+        self._false_direction_rad: float | None = None  # where the false target lies (drawn once)
 
     def set_spec(self, spec: FaultSpec) -> None:
         """Change the fault at runtime (the fault command); the periodic phase restarts."""
@@ -249,7 +272,10 @@ class FaultInjector:
     def apply(self, value: object, *, height_m: float | None, attempt: int = 1) -> object | None:
         """One new value: what to use in its place. None where the fault drops it; the value given out last
         where a stale fault gives that again (a `TargetReading` with the new one's capture time); else
-        `value` itself. `height_m` and `attempt` as in `admit`."""
+        `value` itself, or under a stalestamp fault, with its probability, `value` with the capture time of the
+        reading given last (a value that carries no time passes as it is); under a false fault, with its probability, the value pointing at the false target
+        instead (a `TargetReading`, or a sequence of `MarkerDetection`s; a reading without a range is kept
+        while the height is unknown). `height_m` and `attempt` as in `admit`."""
         self.produced += 1
         spec = self.spec
         active = spec.active and not (spec.first_attempt_only and attempt > 1)
@@ -259,11 +285,35 @@ class FaultInjector:
                 old = self._last
                 both_readings = isinstance(old, TargetReading) and isinstance(value, TargetReading)
                 return old.restamped(value) if both_readings else old
+        elif active and spec.kind is FaultKind.STALESTAMP:
+            if self._rng.random() < spec.probability and isinstance(value, TargetReading) \
+                    and isinstance(self._last, TargetReading):
+                self.old_stamped += 1
+                value = replace(value, capture_time_s=self._last.capture_time_s)
+        elif active and spec.kind is FaultKind.FALSE:
+            if self._rng.random() < spec.probability:
+                false = self._false_target(value, spec.offset_m, height_m)
+                if false is not None:
+                    self.falsified += 1
+                    self._last = false
+                    return false
         elif active and self._should_drop(spec, height_m):
             self.dropped += 1
             return None
         self._last = value
         return value
+
+    def _false_target(self, value: object, offset_m: float, height_m: float | None) -> object | None:
+        """`value` pointing at the false target: `offset_m` from the real one, in the sensor's frame, in a
+        direction drawn the first time (a false target stays where it is while the vehicle descends)."""
+        if self._false_direction_rad is None:
+            self._false_direction_rad = float(self._rng.uniform(0.0, 2.0 * math.pi))
+        offset = (offset_m * math.cos(self._false_direction_rad), offset_m * math.sin(self._false_direction_rad))
+        if isinstance(value, TargetReading):
+            return value.displaced(offset_cam_m=offset, height_m=height_m)
+        if isinstance(value, (list, tuple)) and all(hasattr(item, "displaced") for item in value):
+            return type(value)(item.displaced(offset_cam_m=offset, height_m=height_m) for item in value)
+        raise TypeError(f"a false-target fault cannot displace a {type(value).__name__} of sensor {self.sensor!r}")
 
     def arrival_s(self, ready_s: float, *, attempt: int = 1) -> float:
         """When a value kept by `apply` and ready at `ready_s` (s, the clock's) arrives: `ready_s` itself

@@ -10,7 +10,7 @@ and the pad's layout enter a reading, never the simulator's truth.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -42,6 +42,14 @@ class MarkerDetection:
     def angles_rad(self) -> tuple[float, float]:
         x, y, z = self.pad_center_cam_m
         return angles_from_camera_point(float(x), float(y), float(z))
+
+    def displaced(self, *, offset_cam_m: tuple[float, float], height_m: float | None = None) -> "MarkerDetection":
+        """This detection as if its marker lay `offset_cam_m` (x right, y down in the image; m) away in the
+        camera frame: its pose and the pad centre move, its pixel corners stay (a false detection's pose is
+        what a land mode reads). `height_m` is not needed: the pose has the range."""
+        shift = np.array([offset_cam_m[0], offset_cam_m[1], 0.0])
+        return replace(self, tvec=np.asarray(self.tvec, dtype=float).reshape(3) + shift,
+                       pad_center_cam_m=np.asarray(self.pad_center_cam_m, dtype=float) + shift)
 
 
 def _parameter_kinds() -> dict[str, type]:

@@ -26,6 +26,22 @@ class TargetReading:
         """This value, given again in `new`'s place: `new`'s capture time (a stale fault)."""
         return replace(self, capture_time_s=new.capture_time_s)
 
+    def displaced(self, *, offset_cam_m: tuple[float, float], height_m: float | None) -> "TargetReading | None":
+        """This reading as if it pointed at a spot `offset_cam_m` (x right, y back; m) from its target on the
+        ground plane: the spot's range along the optical axis is the reading's (from `distance_m`) or, without
+        one, `height_m`; None when neither is known."""
+        tan_x, tan_y = math.tan(self.angle_x_rad), math.tan(self.angle_y_rad)
+        if self.distance_m is not None and self.distance_m > 0:
+            depth_m = self.distance_m / math.sqrt(tan_x * tan_x + tan_y * tan_y + 1.0)
+        elif height_m is not None and height_m > 0:
+            depth_m = height_m
+        else:
+            return None
+        x_m, y_m = tan_x * depth_m + offset_cam_m[0], tan_y * depth_m + offset_cam_m[1]
+        angle_x, angle_y = angles_from_camera_point(x_m, y_m, depth_m)
+        distance = None if self.distance_m is None else math.sqrt(x_m * x_m + y_m * y_m + depth_m * depth_m)
+        return replace(self, angle_x_rad=angle_x, angle_y_rad=angle_y, distance_m=distance)
+
     def to_landing_target(self) -> LandingTarget:
         return LandingTarget(timestamp_s=self.capture_time_s, angle_x_rad=self.angle_x_rad,
                              angle_y_rad=self.angle_y_rad, distance_m=self.distance_m,

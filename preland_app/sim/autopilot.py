@@ -277,6 +277,9 @@ class Autopilot:
     def step(self, *, dt_s: float, now_s: float, nav: NavEstimate, yaw_rad: float,
              touching_ground: bool, roll_rad: float = 0.0, pitch_rad: float = 0.0) -> ActuatorDemand:
         """Run one control cycle on the estimate; returns the actuator demand."""
+        # The gyro's rate (rad/s) from the attitude's change over the step: small angles, so Euler rates will do.
+        gyro_rad_s = math.sqrt((roll_rad - self.roll_rad) ** 2 + (pitch_rad - self.pitch_rad) ** 2
+                               + math.remainder(yaw_rad - self.yaw_rad, 2 * math.pi) ** 2) / dt_s if dt_s > 0 else 0.0
         self._now_s = now_s
         self.nav = nav
         self.yaw_rad = yaw_rad
@@ -289,7 +292,7 @@ class Autopilot:
                                       height_m=self.height_above_ground_m(),
                                       roll_rad=self.roll_rad + nav.roll_error_rad,
                                       pitch_rad=self.pitch_rad + nav.pitch_error_rad,
-                                      yaw_rad=yaw_rad + nav.heading_error_rad)
+                                      yaw_rad=yaw_rad + nav.heading_error_rad, gyro_rad_s=gyro_rad_s)
         if not self.armed:
             self.last_climb_demand_m_s = 0.0
             return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)

@@ -11,8 +11,11 @@ target's position *relative to the vehicle*, moved to the present with the
 vehicle's motion since the capture. As in ArduPilot, the estimator works in that
 relative frame: PLND_EST_TYPE=1 is a per-axis position/velocity Kalman filter
 predicted with the IMU's delta-velocity (PLND_ACC_P_NSE) and corrected with the
-measurements (noise 1 % of the height plus 2 cm); PLND_EST_TYPE=0 uses the raw
-measurement. The target's position for the controller is the vehicle's position
+measurements (noise 1 % of the height, 1 % more per rad/s of the vehicle's
+rotation, plus 2 cm), each refused while its
+normalised innovation squared exceeds 3 on either axis unless three in a row were
+refused before it (AC_PrecLand's outlier gate, in 3.6, 4.0 and 4.6 alike);
+PLND_EST_TYPE=0 uses the raw measurement, ungated. The target's position for the controller is the vehicle's position
 estimate plus the relative estimate, so GPS noise does not move the target.
 Measurements older than 1 s are dropped; the target counts as lost 2 s after the
 last one.
@@ -33,6 +36,10 @@ _HISTORY_S = 1.5
 # AC_PrecLand::init constrains PLND_LAG to this range before sizing the inertial history buffer.
 PLND_LAG_MIN_S = 0.02
 PLND_LAG_MAX_S = 0.25
+# AC_PrecLand::run_estimator: a measurement whose NIS is 3 or more on either axis is an outlier; after three
+# outliers in a row the next measurement is fused whatever its NIS (so a target that really moved is followed).
+OUTLIER_NIS_MAX = 3.0
+OUTLIER_REJECT_LIMIT = 3
 
 
 @dataclass(slots=True)
@@ -66,6 +73,11 @@ class _AxisFilter:
         p11 = self.p11 + delta_velocity_noise * delta_velocity_noise
         self.p00, self.p01, self.p11 = p00, p01, p11
 
+    def nis(self, measurement: float, variance: float) -> float:
+        """The measurement's normalised innovation squared (PosVelEKF::getPosNIS)."""
+        innovation = measurement - self.position
+        return innovation * innovation / (self.p00 + variance)
+
     def update(self, measurement: float, variance: float) -> None:
         innovation = measurement - self.position
         s = self.p00 + variance
@@ -89,6 +101,9 @@ class PrecisionLandingEstimator:
         self.last_measured_height_m: float | None = None
         self.measurements_used = 0
         self.measurements_dropped = 0
+        self.measurements_rejected = 0  # refused by the outlier gate
+        self._outlier_reject_count = 0
+        self.gyro_rad_s = 0.0
 
     def reset(self) -> None:
         self._filters = None
@@ -96,8 +111,10 @@ class PrecisionLandingEstimator:
         self._last_update_s = None
 
     def record_pose(self, sample_time_s: float, *, north_m: float, east_m: float, height_m: float,
-                    roll_rad: float, pitch_rad: float, yaw_rad: float) -> None:
-        """Keep the recent estimated poses, so measurements use the pose at their capture time."""
+                    roll_rad: float, pitch_rad: float, yaw_rad: float, gyro_rad_s: float = 0.0) -> None:
+        """Keep the recent estimated poses, so measurements use the pose at their capture time. `gyro_rad_s`:
+        the vehicle's rotation rate now (the length of the gyro's vector), which widens the measurement noise."""
+        self.gyro_rad_s = gyro_rad_s
         self._history.append(_PoseSample(sample_time_s, north_m, east_m, height_m, roll_rad, pitch_rad, yaw_rad))
         while self._history and self._history[0].time_s < sample_time_s - _HISTORY_S:
             self._history.popleft()
@@ -120,7 +137,8 @@ class PrecisionLandingEstimator:
 
     def handle(self, now_s: float, target: LandingTarget) -> bool:
         """Fuse one measurement received at `now_s`; False when it was dropped (older than 1 s by its
-        timestamp, not a number, or pointing above the horizon). Its pose is the one PLND_LAG before `now_s`."""
+        timestamp, not a number, or pointing above the horizon) or refused as an outlier (the filter's NIS gate,
+        PLND_EST_TYPE=1). Its pose is the one PLND_LAG before `now_s`."""
         if now_s - target.timestamp_s > MEASUREMENT_MAX_AGE_S or not _finite(target):
             self.measurements_dropped += 1
             return False
@@ -152,10 +170,19 @@ class PrecisionLandingEstimator:
         rel_down = downward * scale + cam_d
         self.last_measured_height_m = rel_down
         self._raw_rel = (rel_north, rel_east)
-        variance = (0.01 * rel_down + 0.02) ** 2  # AC_PrecLand's xy measurement noise
+        # AC_PrecLand's xy measurement noise: 1 % of the height, 1 % more per rad/s of rotation, plus 2 cm.
+        variance = (rel_down * (0.01 + 0.01 * self.gyro_rad_s) + 0.02) ** 2
         if self._filters is None or not self.target_acquired(now_s):
             self._filters = (_AxisFilter(rel_north, variance), _AxisFilter(rel_east, variance))
         else:
+            if self.params.value("PLND_EST_TYPE") != 0:
+                nis = max(self._filters[0].nis(rel_north, variance), self._filters[1].nis(rel_east, variance))
+                if nis >= OUTLIER_NIS_MAX and self._outlier_reject_count < OUTLIER_REJECT_LIMIT:
+                    # Not fused, and the target's last update stays where it was (target_acquired ages).
+                    self._outlier_reject_count += 1
+                    self.measurements_rejected += 1
+                    return False
+            self._outlier_reject_count = 0
             self._filters[0].update(rel_north, variance)
             self._filters[1].update(rel_east, variance)
         self._last_update_s = now_s
