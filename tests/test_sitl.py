@@ -237,6 +237,18 @@ def test_sitl_gets_a_rangefinder_and_a_per_trial_gps_error(fake_sitl, thesis_mis
                                                          ).details["wind_from_deg"]
 
 
+@pytest.mark.parametrize("usage, flag", [("--serial0 device  set device string for SERIAL0", "--serial0"),
+                                         ("--uartA device  set device string for UARTA", "--uartA")])
+def test_the_first_serial_port_is_named_as_the_binarys_help_names_it(tmp_path, usage, flag):
+    # ArduPilot 4.5 renamed --uartA to --serial0; the 2020 ArduCopter's --help lists --uartA and exits 1.
+    from preland_app.runtime.sitl import _serial0_flag
+
+    binary = tmp_path / "arducopter"
+    binary.write_text(f"#!/bin/sh\necho 'Options:'\necho '\t{usage}'\nexit 1\n")
+    binary.chmod(0o755)
+    assert _serial0_flag(str(binary), binary.stat().st_mtime_ns) == flag
+
+
 def test_the_physics_ardupilot_or_preland_comes_from_the_url_or_the_options(tmp_path):
     from preland_app.runtime.base import RuntimeOptionError, open_runtime
     from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS, PACKAGED_DEFAULTS

@@ -17,7 +17,7 @@ import asyncio
 from collections import Counter, deque
 
 from ..clock import join, wait_until
-from ..errors import PrelandError
+from ..errors import CommandDenied, PrelandError
 from ..sensing.faults import FaultCommand, FaultSpec
 from ..sensing.fusion import FusedSensor
 from ..sensing.marker import choose_smallest, reading_from_detection
@@ -31,6 +31,15 @@ from .cautious_retry import CompanionRetry
 
 SENSORS = ("irlock", "marker", "fused")
 TELEMETRY_PERIOD_S = 0.1
+
+
+async def _has_param(vehicle, name: str) -> bool:
+    """Whether the autopilot has parameter `name` (one that answers no read of it has not)."""
+    try:
+        await vehicle.get_param(name)
+    except CommandDenied:
+        return False
+    return True
 
 
 class MissingSensor(PrelandError):
@@ -87,7 +96,9 @@ class PrecisionLanding:
         vehicle = context.vehicle
         params: dict[str, float] = {"PLND_ENABLED": 1, "PLND_TYPE": 1}
         if self.cautious is None:
-            params["PLND_STRICT"] = 0
+            # ArduCopter before 4.1 has no PLND_STRICT: a lost target never held its descent, as 0 does not.
+            if await _has_param(vehicle, "PLND_STRICT"):
+                params["PLND_STRICT"] = 0
         else:
             params.update(self.cautious.ardupilot_params())
         for name, value in params.items():

@@ -179,7 +179,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     trajectory = recorder.array()
     command = events.first("land_handover")
     final = touchdown = None
-    if truth_source is not None and outcome is Outcome.LANDED and len(trajectory):
+    if recorded_truth is not None and outcome is Outcome.LANDED and len(trajectory):
         final = trajectory[-1]  # where it came to rest; the first row on the ground after the hand-over times it
         on_ground = [row for row in trajectory if command is not None and row[0] >= command.time_s
                      and row[6] <= ON_GROUND_M]

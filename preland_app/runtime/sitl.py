@@ -305,6 +305,19 @@ class GpsErrorDriver:
                 await vehicle.set_param(name, value)
 
 
+@functools.lru_cache(maxsize=8)
+def _serial0_flag(binary: str, modified_ns: int) -> str:
+    """The binary's flag for its first serial port: `--serial0` (ArduPilot 4.5 and later) or `--uartA` (4.4 and
+    earlier, such as the thesis' 2020 ArduCopter), read from its --help (`modified_ns` keys the cache)."""
+    try:
+        listed = subprocess.run([binary, "--help"], capture_output=True, text=True, errors="replace",
+                                timeout=30, check=False)
+    except (OSError, subprocess.TimeoutExpired) as error:
+        raise SitlError(f"{binary} --help: {error}") from None
+    usage = listed.stdout + listed.stderr
+    return "--uartA" if "--uartA" in usage and "--serial0" not in usage else "--serial0"
+
+
 def _free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
@@ -362,9 +375,11 @@ class SitlInstance:
             model = ["--model", "JSON:127.0.0.1", "--sim-port-out", str(self.bridge.address[1])]
         else:
             model = ["--model", "+"]
-        return [str(self.options.binary), *model, "--speedup", f"{self.options.speedup:g}",
+        binary = str(self.options.binary)
+        serial0 = _serial0_flag(binary, self.options.binary.stat().st_mtime_ns)
+        return [binary, *model, "--speedup", f"{self.options.speedup:g}",
                 "--defaults", defaults, "-I", str(self.instance), f"--home={home}",
-                "--serial0", f"udpclient:127.0.0.1:{self.port}"]
+                serial0, f"udpclient:127.0.0.1:{self.port}"]
 
     def _start_bridge(self) -> None:
         # Bound (port 0: the system picks a free one) and serving before SITL starts, so no other trial
@@ -505,7 +520,9 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
         # In lock-step the GPS error moves on from the mission's start, which is at the same vehicle time
         # in every trial, so SITL's GPS is the same whenever the companion connected.
         start_s = MISSION_START_S if lockstep is not None else 0.0
-        outcome = await fly_mavlink(request, url=sitl.url, truth=True, tlog_path=tlog_path,
+        # On preland's physics the bridge's state is the truth: no SIM_STATE asked for (the 2020 ArduCopter
+        # sends none, only SIMSTATE, which has no altitude).
+        outcome = await fly_mavlink(request, url=sitl.url, truth=not on_preland_physics, tlog_path=tlog_path,
                                     fault_listen=options.fault_listen,
                                     companions=(sitl.watch, functools.partial(gps.run, first_update_s=start_s)),
                                     lockstep=lockstep,
