@@ -139,7 +139,9 @@ def test_a_stale_fault_repeats_readings_and_the_outcome_records_it():
                                   "delay:100:-1", "delay:1:2:3", "delay:nan", "delay:6000", "delay:100:x",
                                   "false", "false:0.5", "false:0.5:0", "false:0.5:-1", "false:0.5:60",
                                   "false:1.5:2", "false:0.5:nan", "false:0.1:2:3", "stalestamp",
-                                  "stalestamp:2", "stalestamp:0.5:1"])
+                                  "stalestamp:2", "stalestamp:0.5:1", "none+random:0.5", "random:0.5+none",
+                                  "delay:50+random:0.2+delay:20", "random:0.5+", "+delay:50",
+                                  "random:0.5++delay:5", "random:2+delay:50"])
 def test_bad_fault_syntax_is_rejected(text):
     with pytest.raises(FaultSyntaxError):
         FaultSpec.parse(text)
@@ -149,7 +151,8 @@ def test_fault_syntax_round_trips():
     for text in ("none", "random:0.5", "periodic:4:1", "permanent", "below:3", "above:2.5:first-attempt",
                  "burst:0.3:5", "burst:0.5:2.5:first-attempt", "stale:0.25", "delay:120", "delay:100:40",
                  "delay:60:first-attempt", "false:0.1:3", "false:0.25:0.5:first-attempt",
-                 "stalestamp:0.3", "stalestamp:1:first-attempt"):
+                 "stalestamp:0.3", "stalestamp:1:first-attempt", "random:0.75+delay:50",
+                 "below:3:first-attempt+stale:0.2", "burst:0.5:3+false:0.1:2+delay:100:20"):
         assert str(FaultSpec.parse(text)) == text
 
 
@@ -247,6 +250,38 @@ def test_a_delayed_irlock_reaches_the_autopilot_late_in_order_and_the_landing_co
     # Values still on their way at touchdown never arrive: at most 140 ms of them.
     assert 0 <= details["irlock_delayed"] - details["landing_targets_sent"] <= 7
     assert 95.0 < details["irlock_delay_mean_ms"] < 110.0
+
+
+def test_combined_faults_apply_in_order_and_the_first_draws_as_it_would_alone():
+    """random:0.5+delay:100: the values random:0.5 alone keeps (same seed), each 100 ms late and in order."""
+    alone, combined = _injector("random:0.5", seed=9), _injector("random:0.5+delay:100", seed=9)
+    assert [part.kind.value for part in combined.spec.parts()] == ["random", "delay"]
+    kept_alone = [k for k in range(2000) if alone.apply(k, height_m=5.0) is not None]
+    kept, arrivals = [], []
+    for k in range(2000):
+        if combined.apply(k, height_m=5.0) is not None:
+            kept.append(k)
+            arrivals.append(combined.arrival_s(0.02 * k))
+    assert kept == kept_alone and 900 < len(kept) < 1100
+    assert np.allclose(np.array(arrivals) - 0.02 * np.array(kept), 0.1)
+    assert sum(part.dropped for part in combined.chain()) == 2000 - len(kept)
+    assert combined.chain()[1].delayed == len(kept)
+
+
+def test_the_thesis_frame_time_with_random_drops_flies_and_counts_both():
+    """The marker's detections at the thesis' Raspberry Pi processing time (about 50 ms a frame, Section 4.2)
+    and half of them lost at random, as in Table 3: it lands on the pad; the outcome counts both."""
+    import preland_app as preland
+
+    mission = preland.load_mission(THESIS_MISSION)
+    outcome = preland.fly(mission, seed=2, land="marker", faults={"marker": "random:0.5+delay:50"},
+                          record_trajectory=False)
+    assert outcome.outcome is preland.Outcome.LANDED and outcome.landing_error_cm < 20.0
+    details = outcome.details
+    assert details["marker_fault"] == "random:0.5+delay:50"
+    assert 0.35 < details["marker_dropped"] / details["marker_produced"] < 0.65
+    kept = details["marker_produced"] - details["marker_dropped"]
+    assert 0 <= kept - details["marker_delayed"] <= 3 and details["marker_delay_mean_ms"] == pytest.approx(50.0, abs=1.0)
 
 
 def test_stalestamp_gives_new_readings_the_time_of_the_one_before_in_the_asked_share():

@@ -158,8 +158,9 @@ class LandSpec:
             require(sensor_name in used, f"faults.{sensor_name}",
                     f"land mode {self.mode!r} does not use the {sensor_name} sensor")
             # A marker's detections carry no time of their own; only the precision modes send them with one.
-            require(sensor_name != "marker" or FaultSpec.parse(text).kind is not FaultKind.STALESTAMP
-                    or isinstance(strategy, PrecisionLanding), f"faults.{sensor_name}",
+            stalestamp = any(part.kind is FaultKind.STALESTAMP for part in FaultSpec.parse(text).parts())
+            require(sensor_name != "marker" or not stalestamp or isinstance(strategy, PrecisionLanding),
+                    f"faults.{sensor_name}",
                     f"land mode {self.mode!r} reads the marker's detections, which carry no time for stalestamp "
                     "to make old (the precision modes send them with one)")
         object.__setattr__(self, "_precision_sensor", sensor)

@@ -79,23 +79,29 @@ class FaultGate:
 
     def details(self) -> dict[str, Any]:
         """Per sensor: its fault, the values produced, the values dropped; under a stale fault the values
-        given again; under a stalestamp fault the values sent with an old time; under a false fault the values replaced by the false target; under a delay fault the values
-        delayed, their mean delay (ms) and those a reader at its
-        ticks passed over."""
+        given again; under a stalestamp fault the values sent with an old time; under a false fault the values
+        replaced by the false target; under a delay fault the values delayed, their mean delay (ms) and those a
+        reader at its ticks passed over. A combined fault's parts count together."""
         details: dict[str, Any] = {}
         for sensor, injector in sorted(self.injectors.items()):
+            chain = injector.chain()
+            kinds = {part.spec.kind for part in chain}
+
+            def total(counter: str) -> Any:
+                return sum(getattr(part, counter) for part in chain)
+
             details[f"{sensor}_fault"] = str(injector.spec)
             details[f"{sensor}_produced"] = injector.produced
-            details[f"{sensor}_dropped"] = injector.dropped
-            if injector.repeated or injector.spec.kind is FaultKind.STALE:
-                details[f"{sensor}_repeated"] = injector.repeated
-            if injector.old_stamped or injector.spec.kind is FaultKind.STALESTAMP:
-                details[f"{sensor}_old_stamp"] = injector.old_stamped
-            if injector.falsified or injector.spec.kind is FaultKind.FALSE:
-                details[f"{sensor}_false"] = injector.falsified
-            if injector.delayed or injector.spec.kind is FaultKind.DELAY:
-                details[f"{sensor}_delayed"] = injector.delayed
-                details[f"{sensor}_delay_mean_ms"] = round(1000.0 * injector.delay_total_s / injector.delayed, 1) \
-                    if injector.delayed else None
+            details[f"{sensor}_dropped"] = total("dropped")
+            for counter, kind, name in (("repeated", FaultKind.STALE, "repeated"),
+                                        ("old_stamped", FaultKind.STALESTAMP, "old_stamp"),
+                                        ("falsified", FaultKind.FALSE, "false")):
+                if total(counter) or kind in kinds:
+                    details[f"{sensor}_{name}"] = total(counter)
+            delayed = total("delayed")
+            if delayed or FaultKind.DELAY in kinds:
+                details[f"{sensor}_delayed"] = delayed
+                details[f"{sensor}_delay_mean_ms"] = round(1000.0 * total("delay_total_s") / delayed, 1) \
+                    if delayed else None
                 details[f"{sensor}_superseded"] = self._superseded[sensor]
         return details

@@ -308,7 +308,7 @@ class GpsErrorDriver:
 @functools.lru_cache(maxsize=8)
 def _serial0_flag(binary: str, modified_ns: int) -> str:
     """The binary's flag for its first serial port: `--serial0` (ArduPilot 4.5 and later) or `--uartA` (4.4 and
-    earlier, such as the thesis' 2020 ArduCopter), read from its --help (`modified_ns` keys the cache)."""
+    earlier, such as a 2020 ArduCopter), read from its --help (`modified_ns` keys the cache)."""
     try:
         listed = subprocess.run([binary, "--help"], capture_output=True, text=True, errors="replace",
                                 timeout=30, check=False)

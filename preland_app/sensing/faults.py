@@ -26,6 +26,9 @@ apply per sensor before fusion. Kinds:
 
 each optionally suffixed `:first-attempt` to apply during the first landing
 attempt only (the thesis' Table 5 removes the failure on the second attempt).
+Faults combine with `+`, applied to each value in the order written
+(`random:0.75+delay:50`: three in four readings dropped, the rest 50 ms late);
+at most one of them a delay, none of them `none`.
 
 `FaultCommand` is the thesis' fault-injection message (its Table 1) with its
 documented rules; it converts to per-sensor `FaultSpec`s.
@@ -64,7 +67,8 @@ class FaultSyntaxError(ValueError):
 
 
 FAULT_SYNTAX = ("none, random:P, periodic:KEEP:DROP, permanent, below:H, above:H, burst:LOSS:LENGTH, stale:P, "
-                "stalestamp:P, delay:MS[:JITTER] or false:P:OFFSET, optionally with :first-attempt")
+                "stalestamp:P, delay:MS[:JITTER] or false:P:OFFSET, optionally with :first-attempt, "
+                "several joined by +")
 # A delay beyond this is no longer a late value but a lost one (ArduPilot drops a LANDING_TARGET older than 1 s).
 DELAY_MAX_MS = 5000.0
 FALSE_OFFSET_MAX_M = 50.0  # farther, and a downward camera at landing heights would not see it
@@ -86,6 +90,7 @@ class FaultSpec:
     jitter_ms: float = 0.0
     offset_m: float = 0.0
     first_attempt_only: bool = False
+    then: "FaultSpec | None" = None  # the next fault of a combined one (A+B), applied after this one
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.probability <= 1.0:
@@ -113,6 +118,13 @@ class FaultSpec:
                 raise FaultSyntaxError(f"jitter must be within 0..{self.delay_ms:g} ms (the delay), "
                                        f"got {self.jitter_ms:g}")
 
+        if self.then is not None:
+            kinds = [part.kind for part in self.parts()]
+            if FaultKind.NONE in kinds:
+                raise FaultSyntaxError("none cannot be combined with another fault")
+            if kinds.count(FaultKind.DELAY) > 1:
+                raise FaultSyntaxError("a combined fault takes at most one delay")
+
         if self.kind is FaultKind.FALSE and not (math.isfinite(self.offset_m) and
                                                  0.0 < self.offset_m <= FALSE_OFFSET_MAX_M):
             raise FaultSyntaxError(f"false target offset must be within 0..{FALSE_OFFSET_MAX_M:g} m and above 0, "
@@ -120,7 +132,19 @@ class FaultSpec:
 
     @classmethod
     def parse(cls, text: str) -> "FaultSpec":
-        """Parse the CLI/spec syntax (see FAULT_SYNTAX)."""
+        """Parse the CLI/spec syntax (see FAULT_SYNTAX); `A+B` is A with B as its `then`."""
+        pieces = str(text).split("+")
+        if len(pieces) == 1:
+            return cls._parse_one(text)
+        if any(not piece.strip() for piece in pieces):
+            raise FaultSyntaxError(f"fault {text!r}: an empty part around + (expected {FAULT_SYNTAX})")
+        combined = None
+        for piece in reversed(pieces):
+            combined = replace(cls._parse_one(piece), then=combined)
+        return combined
+
+    @classmethod
+    def _parse_one(cls, text: str) -> "FaultSpec":
         parts = [p.strip() for p in str(text).strip().lower().split(":")]
         first_attempt = False
         if len(parts) > 1 and parts[-1] == FIRST_ATTEMPT_SUFFIX:
@@ -172,7 +196,12 @@ class FaultSpec:
             FaultKind.FALSE: f"false:{self.probability:g}:{self.offset_m:g}",
             FaultKind.DELAY: f"delay:{self.delay_ms:g}" + (f":{self.jitter_ms:g}" if self.jitter_ms else ""),
         }[self.kind]
-        return text + (f":{FIRST_ATTEMPT_SUFFIX}" if self.first_attempt_only else "")
+        text += f":{FIRST_ATTEMPT_SUFFIX}" if self.first_attempt_only else ""
+        return text if self.then is None else f"{text}+{self.then}"
+
+    def parts(self) -> tuple["FaultSpec", ...]:
+        """This fault and those combined after it, in order (each with no `then`)."""
+        return (replace(self, then=None),) + (self.then.parts() if self.then is not None else ())
 
     @property
     def active(self) -> bool:
@@ -241,6 +270,8 @@ class FaultInjector:
         self.sensor = sensor
         self.spec = spec
         self._rng = rng
+        # A combined fault's next part, on a stream of its own (spawning leaves this one's draws as they were).
+        self._next = FaultInjector(sensor=sensor, spec=spec.then, rng=rng.spawn(1)[0]) if spec.then else None
         self._phase = 0
         self._in_burst: bool | None = None  # the burst channel's state (None: not drawn yet)
         self._last: object | None = None  # the value given out last (a stale fault gives it again)
@@ -257,6 +288,7 @@ class FaultInjector:
     def set_spec(self, spec: FaultSpec) -> None:
         """Change the fault at runtime (the fault command); the periodic phase restarts."""
         self.spec = spec
+        self._next = FaultInjector(sensor=self.sensor, spec=spec.then, rng=self._rng.spawn(1)[0]) if spec.then else None
         self._phase = 0
         self._in_burst = None
         self._last = None
@@ -269,13 +301,25 @@ class FaultInjector:
         new = object()
         return self.apply(new, height_m=height_m, attempt=attempt) is new
 
+    def chain(self) -> tuple["FaultInjector", ...]:
+        """This injector and those of the parts combined after it, in order."""
+        return (self,) + (self._next.chain() if self._next is not None else ())
+
     def apply(self, value: object, *, height_m: float | None, attempt: int = 1) -> object | None:
+        """One new value: what to use in its place, after this fault and then each combined after it (see
+        `_apply_own`). `height_m` and `attempt` as in `admit`."""
+        value = self._apply_own(value, height_m=height_m, attempt=attempt)
+        if value is not None and self._next is not None:
+            value = self._next.apply(value, height_m=height_m, attempt=attempt)
+        return value
+
+    def _apply_own(self, value: object, *, height_m: float | None, attempt: int = 1) -> object | None:
         """One new value: what to use in its place. None where the fault drops it; the value given out last
         where a stale fault gives that again (a `TargetReading` with the new one's capture time); else
         `value` itself, or under a stalestamp fault, with its probability, `value` with the capture time of the
-        reading given last (a value that carries no time passes as it is); under a false fault, with its probability, the value pointing at the false target
-        instead (a `TargetReading`, or a sequence of `MarkerDetection`s; a reading without a range is kept
-        while the height is unknown). `height_m` and `attempt` as in `admit`."""
+        reading given last (a value that carries no time passes as it is); under a false fault, with its
+        probability, the value pointing at the false target instead (a `TargetReading`, or a sequence of
+        `MarkerDetection`s; a reading without a range is kept while the height is unknown)."""
         self.produced += 1
         spec = self.spec
         active = spec.active and not (spec.first_attempt_only and attempt > 1)
@@ -319,6 +363,8 @@ class FaultInjector:
         """When a value kept by `apply` and ready at `ready_s` (s, the clock's) arrives: `ready_s` itself
         unless a delay fault holds it back, then after its drawn delay and never before the value ahead."""
         spec = self.spec
+        if spec.kind is not FaultKind.DELAY and self._next is not None:
+            return self._next.arrival_s(ready_s, attempt=attempt)
         if spec.kind is not FaultKind.DELAY or (spec.first_attempt_only and attempt > 1):
             return max(ready_s, self._last_arrival_s)
         delay_ms = spec.delay_ms
