@@ -22,7 +22,6 @@ import statistics
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,29 +29,19 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import numpy as np  # noqa: E402
-from fault_scenarios_table import CALM, CALM_LABELS, FIELD_TABLE, GUSTY, SCENARIOS, field_trials  # noqa: E402
+from fault_scenarios_table import FIELD_TABLE, SCENARIOS, field_trials, scenario_request  # noqa: E402
 from scipy.stats import mannwhitneyu  # noqa: E402
 
-from preland_app.config.mission import load_mission  # noqa: E402
-from preland_app.runtime.embedded import TrialRequest, run_trial  # noqa: E402
+from preland_app.runtime.embedded import run_trial  # noqa: E402
 from preland_app.runtime.sitl import SitlOptions, run_sitl_trial  # noqa: E402
 
 EMBEDDED = "embedded"
 
 
-def _request(label: str, seed: int) -> TrialRequest:
-    mode, sensor, faults, height, *_ = SCENARIOS[label]
-    mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
-    wind = CALM if label in CALM_LABELS else GUSTY
-    environment = replace(mission.environment, wind=replace(mission.environment.wind, **wind))
-    return TrialRequest(mission=replace(mission, environment=environment), seed=seed, land_mode=mode, sensor=sensor,
-                        faults=faults, takeoff_altitude_rel_m=float(height), record_trajectory=False)
-
-
 def _one(job: tuple[str, str | None, str, int]) -> tuple[str, str, int, str, float | None, str]:
     """(witness, scenario, seed, outcome, landing error cm, message)"""
     witness, binary, label, seed = job
-    request = _request(label, seed)
+    request = scenario_request(label, seed)
     if binary is None:
         outcome = run_trial(request)
     else:

@@ -71,15 +71,20 @@ CALM = {"speed_m_s": 0.5, "turbulence_w20_m_s": 0.5}
 GUSTY = {"speed_m_s": 3.0, "turbulence_w20_m_s": 5.0}
 
 
-def _one(job: tuple[str, int]) -> tuple[str, int, str, float | None, float | None, int]:
-    label, seed = job
+def scenario_request(label: str, seed: int) -> TrialRequest:
+    """One trial of scenario `label` in its weather (Table 3's near-calm air, else gusts), as every runtime
+    flies it."""
     mode, sensor, faults, height, *_ = SCENARIOS[label]
     mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
     wind = CALM if label in CALM_LABELS else GUSTY
     environment = replace(mission.environment, wind=replace(mission.environment.wind, **wind))
-    mission = replace(mission, environment=environment)
-    o = run_trial(TrialRequest(mission=mission, seed=seed, land_mode=mode, sensor=sensor, faults=faults,
-                               takeoff_altitude_rel_m=float(height), record_trajectory=False))
+    return TrialRequest(mission=replace(mission, environment=environment), seed=seed, land_mode=mode, sensor=sensor,
+                        faults=faults, takeoff_altitude_rel_m=float(height), record_trajectory=False)
+
+
+def _one(job: tuple[str, int]) -> tuple[str, int, str, float | None, float | None, int]:
+    label, seed = job
+    o = run_trial(scenario_request(label, seed))
     return label, seed, o.outcome.value, o.landing_error_cm, o.landing_time_s, int(o.details.get("attempts", 1))
 
 

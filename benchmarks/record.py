@@ -54,6 +54,10 @@ def main(argv: list[str]) -> int:
     if not script.is_file():
         print(f"record.py: {argv[0]}: no such benchmark script", file=sys.stderr)
         return 2
+    # What ran is what was checked out when it started: a commit made while a long run goes on is not it.
+    # Records written by earlier runs are not changes to what runs.
+    commit = _git("rev-parse", "HEAD")
+    dirty = bool(_git("status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)benchmarks/results"))
     started = datetime.datetime.now(datetime.timezone.utc)
     t0 = time.perf_counter()
     process = subprocess.Popen([sys.executable, str(script), *argv[1:]], cwd=ROOT, stdout=subprocess.PIPE,
@@ -67,8 +71,8 @@ def main(argv: list[str]) -> int:
     record = {
         "script": f"benchmarks/{script.name}",
         "args": argv[1:],
-        "commit": _git("rev-parse", "HEAD"),
-        "dirty": bool(_git("status", "--porcelain", "--untracked-files=no")),
+        "commit": commit,
+        "dirty": dirty,
         "date_utc": started.replace(microsecond=0).isoformat(),
         "wall_time_s": round(time.perf_counter() - t0, 1),
         "machine": machine(),

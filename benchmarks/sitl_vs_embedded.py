@@ -25,17 +25,15 @@ import statistics
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from fault_scenarios_table import CALM, GUSTY, SCENARIOS  # noqa: E402
+from fault_scenarios_table import SCENARIOS, scenario_request  # noqa: E402
 
-from preland_app.config.mission import load_mission  # noqa: E402
-from preland_app.runtime.embedded import TrialRequest, run_trial  # noqa: E402
+from preland_app.runtime.embedded import run_trial  # noqa: E402
 from preland_app.runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial  # noqa: E402
 
 SWEEP_LABEL = "T3 marker"
@@ -43,20 +41,11 @@ SWEEP_LABEL = "T3 marker"
 # so at a high speedup it processes fewer frames per vehicle second than the camera's 30.
 
 
-def _request(label: str, seed: int) -> TrialRequest:
-    mode, sensor, faults, height, *_ = SCENARIOS[label]
-    mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
-    wind = CALM if label.startswith("T3") else GUSTY
-    environment = replace(mission.environment, wind=replace(mission.environment.wind, **wind))
-    return TrialRequest(mission=replace(mission, environment=environment), seed=seed, land_mode=mode, sensor=sensor,
-                        faults=faults, takeoff_altitude_rel_m=float(height), record_trajectory=False)
-
-
 def _one(job: tuple[str, str, int, str, float]) -> tuple:
     """(runtime, label, seed, outcome, error cm, landing time s, wall s)"""
     runtime, label, seed, binary, speedup = job  # speedup None: preland's default
     started = time.perf_counter()
-    request = _request(label, seed)
+    request = scenario_request(label, seed)
     if runtime == "sitl":
         outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup))
     else:
