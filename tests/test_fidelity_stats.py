@@ -1,6 +1,7 @@
 """The fidelity statistics, each against a case computed by hand, and the report's verdicts on seeded data."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -82,3 +83,7 @@ def test_the_section_rejects_the_scenario_that_differs_after_holms_correction():
     assert "1 of 2 scenarios consistent with the field; rejected: shifted." in text
     assert "| shifted | 30 | 10 |" in text and "30/30 (88%..100%)" in text
     assert not math.isnan(tests["same"].floor_median)
+    # A rejected scenario with random drops: the section says that no witness produces the field's cost.
+    assert "Random drops" not in text
+    dropping = replace(shifted, failures="irlock random:0.75")
+    assert "Random drops: the field trials lost more" in verdicts_section([same, dropping])
