@@ -305,7 +305,7 @@ def _summary(label, errors_cm, *, published_cm):
     from types import SimpleNamespace
 
     return SimpleNamespace(
-        scenario=label, source="sim", reference=SimpleNamespace(min_error_cm=None),
+        scenario=label, source="sim", failures="none", reference=SimpleNamespace(min_error_cm=None),
         published=[SimpleNamespace(error_cm=e, landing_time_s=22.0) for e in published_cm],
         errors_cm=lambda: errors_cm,
         trials=[{"outcome": "landed", "landing_error_cm": e, "landing_time_s": 20.0} for e in errors_cm],
