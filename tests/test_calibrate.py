@@ -370,3 +370,9 @@ def test_the_fidelity_note_says_when_the_means_interval_reaches_across_the_publi
     section = fidelity_section(summaries, spec_text=None, source_path="c.yaml")
     assert "2 of 3 simulated means inside the published min..max; for 2 of the 3, the mean's 95 % CI reaches " \
            "across an end of the range." in section
+    # ArduPilot SITL's trials of a scenario: a row of their own, named so, beside the simulator's.
+    sitl = summary("settled", [40.0, 41.0, 42.0])
+    sitl.source = "sitl"
+    rows = {row[0]: row for row in fidelity_rows([*summaries, sitl], None)}
+    assert rows["settled (ArduPilot SITL)"][1] == "ArduPilot SITL" and rows["settled (ArduPilot SITL)"][6] == "above"
+    assert rows["settled"][6] == "inside"

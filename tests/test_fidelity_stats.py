@@ -87,3 +87,9 @@ def test_the_section_rejects_the_scenario_that_differs_after_holms_correction():
     assert "Random drops" not in text
     dropping = replace(shifted, failures="irlock random:0.75")
     assert "Random drops: the field trials lost more" in verdicts_section([same, dropping])
+    # ArduPilot SITL's trials of the same scenarios: a part of their own, corrected over their own scenarios.
+    witness = [replace(same, source="sitl"), replace(shifted, source="sitl")]
+    both = verdicts_section([same, shifted, *witness])
+    assert both.count("1 of 2 scenarios consistent with the field; rejected: shifted.") == 2
+    assert "### Tests per scenario: ArduPilot SITL" in both and both.index("ArduPilot SITL") > both.index("| same |")
+    assert [t.scenario for t in scenario_tests([same, *witness], source="sitl")] == ["same", "shifted"]

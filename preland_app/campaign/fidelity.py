@@ -20,7 +20,7 @@ from pathlib import Path
 import yaml
 
 from ..sim.profile import ProfileSpec, ScenarioScore
-from .fidelity_tests import verdicts_section
+from .fidelity_tests import WITNESSES, verdicts_section
 from .stats import describe
 
 
@@ -122,7 +122,7 @@ def fidelity_rows(summaries, profile: ProfileSpec | None) -> list[tuple[str, ...
     what the fit says about it, and whether the interval reaches across an end of the range."""
     rows = []
     for s in summaries:
-        if s.source != "sim" or s.reference is None:
+        if s.source not in WITNESSES or s.reference is None:
             continue
         errors = s.errors_cm()
         published = [p.error_cm for p in s.published]
@@ -136,9 +136,10 @@ def fidelity_rows(summaries, profile: ProfileSpec | None) -> list[tuple[str, ...
         distance = f"{wasserstein(errors, published):.1f}" if errors and published else ""
         published_mean = s.published_avg_error_cm()
         sim_time, published_time = s.avg_landing_time_s(), s.published_avg_landing_time_s()
-        role = _role(profile, s.scenario)
+        role = _role(profile, s.scenario) if s.source == "sim" else WITNESSES[s.source]
         notes = []
-        score = profile.provenance.score_of(s.scenario) if profile and profile.provenance else None
+        score = profile.provenance.score_of(s.scenario) if profile and profile.provenance and s.source == "sim" \
+            else None
         if score is not None and not score.inside:
             fit_said = f"{score.sim_mean_cm:.1f} cm against {score.field_min_cm:.1f}..{score.field_max_cm:.1f}"
             notes.append(f"inside in this run, not in the fit's own scoring trials ({fit_said})"
@@ -146,7 +147,7 @@ def fidelity_rows(summaries, profile: ProfileSpec | None) -> list[tuple[str, ...
         unsettled = _unsettled(spread, low, high, inside)
         if unsettled:
             notes.append(unsettled)
-        rows.append((s.scenario, role, "" if mean is None else f"{mean:.1f}", interval,
+        rows.append((s.scenario if s.source == "sim" else f"{s.scenario} ({WITNESSES[s.source]})", role, "" if mean is None else f"{mean:.1f}", interval,
                      "" if published_mean is None else f"{published_mean:.1f}",
                      "" if low is None or high is None else f"{low:.1f}..{high:.1f}", inside, distance,
                      "" if sim_time is None else f"{sim_time:.1f}",
@@ -173,7 +174,8 @@ def fidelity_section(summaries, *, spec_text: str | None, source_path: str) -> s
               "Wasserstein-1 (cm)", "Sim time (s)", "Published time (s)", "Note")
     lines = ["## Fidelity to the field", "",
              f"Each scenario's simulated errors against the published ones: {how}. Role: fitted (the profile was "
-             "fitted on its field trials), held out (scored only), not in the fit, or defaults. Mean: where the "
+             "fitted on its field trials), held out (scored only), not in the fit, or defaults; a row of ArduPilot SITL's "
+             "trials (its runtime `sitl:`, on the same world) is the second witness, named in its scenario. Mean: where the "
              "simulated mean lies against the published min..max; where the mean's 95 % confidence interval (a "
              "bootstrap over the trials) reaches across an end of that range, the note says so: more trials "
              "would be needed to settle on which side the model lies. Wasserstein-1: the distance between the "

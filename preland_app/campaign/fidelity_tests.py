@@ -32,6 +32,8 @@ ALPHA = 0.05  # family-wise error across the scenarios of one report
 FLOOR_DRAWS = 2000
 CEILING_DRAWS = 2000
 SEED = 2020  # the floors and ceilings are resampled with a fixed seed: a report is the same every time
+# The sources judged against the field, each in a section of its own, and how its section names it.
+WITNESSES = {"sim": "the embedded simulator", "sitl": "ArduPilot SITL"}
 
 
 def mann_whitney_p(a: Sequence[float], b: Sequence[float]) -> float | None:
@@ -146,10 +148,11 @@ class ScenarioTest:
         return "" if self.time_holm_p is None else ("rejected" if self.time_holm_p < ALPHA else "consistent")
 
 
-def scenario_tests(summaries) -> list[ScenarioTest]:
-    """The tests of every simulated scenario with published trials (`report.ScenarioSummary`), in order."""
+def scenario_tests(summaries, *, source: str = "sim") -> list[ScenarioTest]:
+    """The tests of every scenario of `source` (sim, sitl) with published trials (`report.ScenarioSummary`), in
+    order; Holm's correction runs over that source's scenarios."""
     rng = np.random.default_rng(SEED)
-    chosen = [s for s in summaries if s.source == "sim" and s.published and s.errors_cm()]
+    chosen = [s for s in summaries if s.source == source and s.published and s.errors_cm()]
     ps = {s.scenario: mann_whitney_p(s.errors_cm(), [p.error_cm for p in s.published]) for s in chosen}
     times = {}
     for s in chosen:
@@ -171,8 +174,13 @@ def scenario_tests(summaries) -> list[ScenarioTest]:
 
 
 def verdicts_section(summaries) -> str:
-    """The report's per-scenario tests and the rank correlation (Markdown), empty without published trials."""
-    tests = scenario_tests(summaries)
+    """The report's per-scenario tests and the rank correlation (Markdown), one part per witness with trials
+    (the embedded simulator, ArduPilot SITL); empty without published trials."""
+    return "".join(_verdicts(summaries, source) for source in WITNESSES)
+
+
+def _verdicts(summaries, source: str) -> str:
+    tests = scenario_tests(summaries, source=source)
     if not tests:
         return ""
 
@@ -182,8 +190,9 @@ def verdicts_section(summaries) -> str:
     header = ("Scenario", "Sim n", "Field n", "Error p (MWU)", "Holm p", "Verdict", "Area (cm)",
               "Over / under (cm)", "Perfect model's area: median (95th) (cm)", "Time Holm p", "Time verdict",
               "Sim landed (95 % CI)")
-    lines = ["", "### Tests per scenario", "",
-             f"Each scenario's simulated landing errors against its published trials: a two-sided Mann-Whitney U "
+    title = "### Tests per scenario" + ("" if source == "sim" else f": {WITNESSES[source]}")
+    lines = ["", title, "",
+             f"Each scenario's landing errors on {WITNESSES[source]} against its published trials: a two-sided Mann-Whitney U "
              f"test, Holm-corrected across these {len(tests)} scenarios to a {ALPHA:.0%} family-wise error "
              "(rejected: the adjusted p is below that). Area: the area between the two empirical CDFs (over: "
              "the simulated errors lie above the field's), beside what a perfect model scores against as many "
@@ -200,13 +209,13 @@ def verdicts_section(summaries) -> str:
     rejected = [t.scenario for t in tests if t.verdict == "rejected"]
     lines += ["", f"{len(tests) - len(rejected)} of {len(tests)} scenarios consistent with the field"
               + (f"; rejected: {'; '.join(rejected)}." if rejected else ".")]
-    failures = {s.scenario: s.failures for s in summaries if s.source == "sim"}
-    if any("random:" in failures.get(scenario, "") for scenario in rejected):
+    failures = {s.scenario: s.failures for s in summaries if s.source == source}
+    if source == "sim" and any("random:" in failures.get(scenario, "") for scenario in rejected):
         lines += ["", "Random drops: the field trials lost more to them than the embedded autopilot does, and "
                       "neither ArduCopter 4.6.3 nor a 2020 ArduCopter (master of 15 October 2020) flying the same "
                       "world on SITL loses as much (`benchmarks/drop_cost_witnesses.py`). What made the "
                       "thesis' drone lose more has no source; it is not modelled, and nothing is fitted to it."]
-    chosen = [s for s in summaries if s.source == "sim" and s.published and s.errors_cm()]
+    chosen = [s for s in summaries if s.source == source and s.published and s.errors_cm()]
     if len(chosen) >= 3:
         rho = spearman([float(np.mean(s.errors_cm())) for s in chosen],
                        [float(np.mean([p.error_cm for p in s.published])) for s in chosen])
