@@ -370,31 +370,22 @@ def test_a_late_irlock_on_real_sitl_still_lands_on_the_beacon(thesis_mission):
 
 
 @needs_real_sitl
-def test_false_irlock_readings_on_real_sitl_are_refused_and_it_lands_on_the_beacon(thesis_mission):
-    """One IR-LOCK reading in ten points 3 m off the beacon, in lock-step on preland's physics: ArduCopter 4.6's
-    outlier gate refuses them (a false one is fused only after three refused in a row), so it lands on the
-    beacon, as the embedded autopilot does."""
+@pytest.mark.parametrize("fault, counted, share", [("false:0.1:3", "irlock_false", (0.05, 0.15)),
+                                                   ("stalestamp:0.5", "irlock_old_stamp", (0.4, 0.6))])
+def test_false_or_old_timed_irlock_readings_on_real_sitl_still_land_on_the_beacon(thesis_mission, fault, counted,
+                                                                                  share):
+    """In lock-step on preland's physics. One IR-LOCK reading in ten pointing 3 m off the beacon: ArduCopter 4.6's
+    outlier gate refuses them (a false one is fused only after three refused in a row). Half the readings
+    carrying the time of the reading before: 4.6 takes a LANDING_TARGET whose (corrected) time equals the last
+    one's as no new measurement (AC_PrecLand::retrieve_los_meas), so those are lost to it, as drops would be.
+    Either way it lands on the beacon, and every reading is sent."""
     outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=3, land_mode="irlock",
-                                          faults={"irlock": "false:0.1:3"}), options=_real(physics="preland"))
+                                          faults={"irlock": fault}), options=_real(physics="preland"))
     assert outcome.outcome is Outcome.LANDED, outcome.message
     details = outcome.details
-    assert details["irlock_fault"] == "false:0.1:3" and details["irlock_dropped"] == 0
-    assert 0.05 < details["irlock_false"] / details["irlock_produced"] < 0.15
+    assert details["irlock_fault"] == fault and details["irlock_dropped"] == 0
+    assert share[0] < details[counted] / details["irlock_produced"] < share[1]
     assert details["landing_targets_sent"] > 500
-    assert outcome.landing_error_cm < 15.0
-
-
-@needs_real_sitl
-def test_irlock_readings_with_old_times_on_real_sitl_still_land_on_the_beacon(thesis_mission):
-    """Half the IR-LOCK readings carry the time of the reading before, in lock-step on preland's physics.
-    ArduCopter 4.6 takes a LANDING_TARGET whose (corrected) time equals the last one's as no new measurement
-    (AC_PrecLand::retrieve_los_meas), so those are lost to it, as drops would be; it still lands on the beacon."""
-    outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=3, land_mode="irlock",
-                                          faults={"irlock": "stalestamp:0.5"}), options=_real(physics="preland"))
-    assert outcome.outcome is Outcome.LANDED, outcome.message
-    details = outcome.details
-    assert details["irlock_fault"] == "stalestamp:0.5" and details["irlock_dropped"] == 0
-    assert 0.4 < details["irlock_old_stamp"] / details["irlock_produced"] < 0.6
     assert outcome.landing_error_cm < 15.0
 
 

@@ -147,7 +147,8 @@ def fidelity_rows(summaries, profile: ProfileSpec | None) -> list[tuple[str, ...
         unsettled = _unsettled(spread, low, high, inside)
         if unsettled:
             notes.append(unsettled)
-        rows.append((s.scenario if s.source == "sim" else f"{s.scenario} ({WITNESSES[s.source]})", role, "" if mean is None else f"{mean:.1f}", interval,
+        name = s.scenario if s.source == "sim" else f"{s.scenario} ({WITNESSES[s.source]})"
+        rows.append((name, role, "" if mean is None else f"{mean:.1f}", interval,
                      "" if published_mean is None else f"{published_mean:.1f}",
                      "" if low is None or high is None else f"{low:.1f}..{high:.1f}", inside, distance,
                      "" if sim_time is None else f"{sim_time:.1f}",
@@ -174,8 +175,9 @@ def fidelity_section(summaries, *, spec_text: str | None, source_path: str) -> s
               "Wasserstein-1 (cm)", "Sim time (s)", "Published time (s)", "Note")
     lines = ["## Fidelity to the field", "",
              f"Each scenario's simulated errors against the published ones: {how}. Role: fitted (the profile was "
-             "fitted on its field trials), held out (scored only), not in the fit, or defaults; a row of ArduPilot SITL's "
-             "trials (its runtime `sitl:`, on the same world) is the second witness, named in its scenario. Mean: where the "
+             "fitted on its field trials), held out (scored only), not in the fit, or defaults; a row of ArduPilot "
+             "SITL's trials (its runtime `sitl:`, on the same world) is the second witness, named in its scenario. "
+             "Mean: where the "
              "simulated mean lies against the published min..max; where the mean's 95 % confidence interval (a "
              "bootstrap over the trials) reaches across an end of that range, the note says so: more trials "
              "would be needed to settle on which side the model lies. Wasserstein-1: the distance between the "

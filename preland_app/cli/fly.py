@@ -128,8 +128,8 @@ def fly(
     sensor: Optional[PrecisionSensor] = typer.Option(None, "--sensor", help="Precision sensor of the cautious "
                                                      "mode."),
     fault: list[str] = typer.Option([], "--fault", metavar="SENSOR=FAULT",
-                                    help="A fault on a sensor's values (repeatable, one per sensor; the how-to on faults "
-                                         f"says what each does): {FAULT_SYNTAX} (to limit it to the first "
+                                    help="A fault on a sensor's values (repeatable, one per sensor; the how-to on "
+                                         f"faults says what each does): {FAULT_SYNTAX} (to limit it to the first "
                                          "landing attempt). E.g. marker=below:3."),
     seed: int = typer.Option(1, "--seed", help="Trial seed: same seed, same outcome."),
     takeoff_altitude_m: Optional[float] = typer.Option(

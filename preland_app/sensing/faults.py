@@ -76,8 +76,8 @@ FALSE_OFFSET_MAX_M = 50.0  # farther, and a downward camera at landing heights w
 
 @dataclass(frozen=True)
 class FaultSpec:
-    """One sensor's fault. `probability` for random, stale and stalestamp, and the long-run share of values dropped for burst;
-    `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values) for burst;
+    """One sensor's fault. `probability` for random, stale and stalestamp, and the long-run share of values
+    dropped for burst; `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values) for burst;
     `delay_ms` and `jitter_ms` (milliseconds) for delay; `probability` and `offset_m` for false."""
 
     kind: FaultKind = FaultKind.NONE
@@ -268,14 +268,8 @@ class FaultInjector:
 
     def __init__(self, *, sensor: str, spec: FaultSpec, rng: np.random.Generator) -> None:
         self.sensor = sensor
-        self.spec = spec
         self._rng = rng
-        # A combined fault's next part, on a stream of its own (spawning leaves this one's draws as they were).
-        self._next = FaultInjector(sensor=sensor, spec=spec.then, rng=rng.spawn(1)[0]) if spec.then else None
-        self._phase = 0
-        self._in_burst: bool | None = None  # the burst channel's state (None: not drawn yet)
-        self._last: object | None = None  # the value given out last (a stale fault gives it again)
-        self._last_arrival_s = -math.inf  # when the value ahead arrives (a delay fault keeps the order)
+        self.set_spec(spec)
         self.produced = 0
         self.dropped = 0
         self.repeated = 0
@@ -286,13 +280,14 @@ class FaultInjector:
         self._false_direction_rad: float | None = None  # where the false target lies (drawn once)
 
     def set_spec(self, spec: FaultSpec) -> None:
-        """Change the fault at runtime (the fault command); the periodic phase restarts."""
+        """Set the fault (and change it at runtime: the fault command); the periodic phase restarts."""
         self.spec = spec
+        # A combined fault's next part, on a stream of its own (spawning leaves this one's draws as they were).
         self._next = FaultInjector(sensor=self.sensor, spec=spec.then, rng=self._rng.spawn(1)[0]) if spec.then else None
         self._phase = 0
-        self._in_burst = None
-        self._last = None
-        self._last_arrival_s = -math.inf
+        self._in_burst: bool | None = None  # the burst channel's state (None: not drawn yet)
+        self._last: object | None = None  # the value given out last (a stale fault gives it again)
+        self._last_arrival_s = -math.inf  # when the value ahead arrives (a delay fault keeps the order)
 
     def admit(self, *, height_m: float | None, attempt: int = 1) -> bool:
         """One new value: True to use it, False where the fault drops it or gives an older one instead.

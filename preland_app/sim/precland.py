@@ -12,11 +12,11 @@ vehicle's motion since the capture. As in ArduPilot, the estimator works in that
 relative frame: PLND_EST_TYPE=1 is a per-axis position/velocity Kalman filter
 predicted with the IMU's delta-velocity (PLND_ACC_P_NSE) and corrected with the
 measurements (noise 1 % of the height, 1 % more per rad/s of the vehicle's
-rotation, plus 2 cm), each refused while its
-normalised innovation squared exceeds 3 on either axis unless three in a row were
-refused before it (AC_PrecLand's outlier gate, in 3.6, 4.0 and 4.6 alike);
-PLND_EST_TYPE=0 uses the raw measurement, ungated. The target's position for the controller is the vehicle's position
-estimate plus the relative estimate, so GPS noise does not move the target.
+rotation, plus 2 cm), each refused while its normalised innovation squared is 3
+or more on either axis unless the three before it were refused (AC_PrecLand's
+outlier gate, in 3.6, 4.0 and 4.6 alike); PLND_EST_TYPE=0 uses the raw
+measurement, ungated. The target's position for the controller is the vehicle's
+position estimate plus the relative estimate, so GPS noise does not move the target.
 Measurements older than 1 s are dropped; the target counts as lost 2 s after the
 last one.
 """
