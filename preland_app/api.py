@@ -154,7 +154,9 @@ def run_campaign(campaign: CampaignSpec | str | os.PathLike, *, db: str | os.Pat
                  options: Mapping[str, Any] | None = None, sitl: str | os.PathLike | None = None,
                  sitl_speedup: float | None = None, progress: Callable[[int, int, Any], None] | None = None,
                  executor: str = "local", ray_address: str | None = None, trial_cpus: float = 1.0,
-                 outcomes_only: bool = False) -> CampaignRun:
+                 outcomes_only: bool = False, operator: Any = None, answers: str | os.PathLike | None = None,
+                 measure: str | None = None, order: str | None = None,
+                 status: Callable[[Any], None] | None = None) -> CampaignRun:
     """Run a campaign (a CampaignSpec or a campaign file) into the SQLite store `db`.
 
     `runtime`: where every trial flies, a runtime URL or a Runtime as for `fly` (default: the campaign file's
@@ -170,7 +172,13 @@ def run_campaign(campaign: CampaignSpec | str | os.PathLike, *, db: str | os.Pat
     `resume=True` finishes a campaign already in the store without repeating a trial; a second driver on the
     same campaign and store is refused (`CampaignBusy`). `outcomes_only=True`: no event logs and
     trajectories in the store. `progress(done, total, record)` is called as trials finish. Read the results
-    back with `read_results`."""
+    back with `read_results`.
+    On a vehicle (`mavlink+...`) the campaign is a field campaign (`preland_app.field.campaign`): between
+    trials the vehicle goes back to the start as the campaign's `field:` block says, each landing is measured
+    (`measure`: operator, vehicle or truth; by `operator`, an `Operator`, or from an `answers` file), a low
+    battery, a pilot takeover or a lost link pauses it, `order="shuffled"` flies the trials in an order drawn
+    from the campaign's seed, and `status(FieldStatus)` is told what it does and waits for. These options are
+    refused for the other runtimes."""
     from .campaign.driver import run_campaign as execute
     from .campaign.executors import ExecutorOptions, create_executor, executor_factory
     from .campaign.store import ResultsStore
@@ -191,6 +199,22 @@ def run_campaign(campaign: CampaignSpec | str | os.PathLike, *, db: str | os.Pat
                                      problem=f"{chosen.url} is one vehicle: its trials fly one at a time "
                                              f"(at most {chosen.max_workers} worker), got {workers}")
         workers = chosen.max_workers
+    field_options = {"operator": operator, "answers": answers, "measure": measure, "order": order,
+                     "status": status}
+    if getattr(chosen, "flies_a_vehicle", False):
+        from .field.campaign import run_field_campaign
+
+        if outcomes_only:
+            raise RuntimeOptionError(option="outcomes_only", runtime=chosen.url,
+                                     problem="a field campaign keeps every trial in full")
+        with ResultsStore(db) as store:
+            ran, total = run_field_campaign(spec, store, runtime=chosen, resume=resume, progress=progress,
+                                            **{k: v for k, v in field_options.items() if v is not None})
+        return CampaignRun(name=spec.name, db=Path(db), ran=ran, total=total)
+    for name, value in field_options.items():
+        if value is not None:
+            raise RuntimeOptionError(option=name, runtime=chosen.url,
+                                     problem="only for a field campaign, on a vehicle (mavlink+...)")
     if not getattr(executor_factory(executor), "runs_elsewhere", False):
         chosen = chosen.on_this_machine()  # a missing SITL binary is refused before any trial starts
     trial_executor = create_executor(executor, ExecutorOptions(workers=workers, address=ray_address,

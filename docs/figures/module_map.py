@@ -119,10 +119,10 @@ def base_units(graph: Graph) -> list[str]:
 POSITIONS = {
     "clock_scaled.py": (0, 0), "cli": (2, 0), "__init__.py": (4, 0), "api.py": (6, 0),
     "campaign": (0, 1),
-    "runtime": (4, 2),
+    "runtime": (4, 2), "field": (6, 2),
     "outcome.py": (0, 3), "mission.py": (6, 3),
     "config": (2, 4),
-    "vehicle": (0, 5), "field": (2, 5), "landing": (4, 5), "sim": (6, 5),
+    "vehicle": (0, 5), "landing": (4, 5), "sim": (6, 5),
     "mavlink": (6, 7),
     "sensing": (0, 8),
 }

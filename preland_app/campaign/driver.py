@@ -55,7 +55,7 @@ def run_campaign(campaign: CampaignSpec, store: ResultsStore, *, workers: int | 
     try:
         lease.acquire()
         try:
-            done = _check_store(campaign, scenarios, store, source=source, resume=resume)
+            done = check_store(campaign, scenarios, store, source=source, resume=resume)
             pending = (job for job in plan_trials(campaign, scenarios, runtime=runtime, outcomes_only=outcomes_only)
                        if job.key not in done)
             finished = sum(1 for s in scenarios for i in range(s.trials) if (s.spec.label, i) in done)
@@ -72,7 +72,7 @@ def run_campaign(campaign: CampaignSpec, store: ResultsStore, *, workers: int | 
         raise CampaignInterrupted(done=finished, total=total) from None
 
 
-def _check_store(campaign: CampaignSpec, scenarios, store: ResultsStore, *, source: str,
+def check_store(campaign: CampaignSpec, scenarios, store: ResultsStore, *, source: str,
                  resume: bool) -> set[tuple[str, int]]:
     """The trials already stored; StoreError when the campaign may not run on this store as asked."""
     done = store.done_keys(campaign.name, source)

@@ -9,6 +9,10 @@ that existed before them.
   "reason": text}]`); `[]` for a trial never changed.
 * `deleted_trials`: every deleted trial's row as JSON, with when and why, so a
   deletion loses nothing that was recorded.
+* `field_log`: a field campaign's journal, appended to and never changed: where
+  the campaign started, each flight as it starts, flights interrupted (the
+  laptop killed mid-flight) or flown again (`redo`, with the redone flight's
+  record as JSON), pauses and what ended them.
 """
 
 from __future__ import annotations
@@ -29,6 +33,16 @@ CREATE TABLE IF NOT EXISTS deleted_trials (
     reason TEXT NOT NULL DEFAULT '',
     row TEXT NOT NULL
 );
+CREATE TABLE IF NOT EXISTS field_log (
+    id INTEGER PRIMARY KEY,
+    campaign TEXT NOT NULL,
+    kind TEXT NOT NULL,
+    scenario TEXT,
+    trial_index INTEGER,
+    at TEXT NOT NULL DEFAULT (strftime('%Y-%m-%dT%H:%M:%SZ', 'now')),
+    data TEXT NOT NULL DEFAULT '{}'
+);
+CREATE INDEX IF NOT EXISTS field_log_by_campaign ON field_log (campaign, id);
 """
 
 

@@ -20,6 +20,7 @@ from ..config.loader import build, deep_merge, load_spec_file, to_plain
 from ..runtime.base import RuntimeUrlError, split_url
 from ..config.mission import FAULTS_SCHEMA, HASH_NEVER, HASH_WHEN_SET, PARAMS_SCHEMA, MissionSpec, load_mission
 from ..errors import SpecError, SpecValueError, require
+from .field_spec import FieldSpec
 from ..sim.spec import EnvironmentSpec
 
 
@@ -72,7 +73,8 @@ class CampaignSpec:
     """A campaign. `mission` is a mission file relative to the campaign file; `pad` overrides its pad preset;
     `sim_profile`: a simulation profile file (relative to the campaign) taking the place of the mission's.
     `runtime`: where the trials fly, a runtime URL (`sim:`, the default; `sitl:PATH`; `mavlink+udp://...`);
-    `preland campaign run --runtime` overrides it."""
+    `preland campaign run --runtime` overrides it. `field`: how the campaign flies on one vehicle (between
+    trials, battery swaps, the pad's surveyed position; `campaign.field_spec`), read by field campaigns only."""
 
     name: str
     mission: str
@@ -84,6 +86,8 @@ class CampaignSpec:
     sim_profile: str | None = field(default=None, metadata=HASH_NEVER)
     runtime: str | None = field(default=None, metadata=HASH_NEVER)
     source_path: str = field(default="", compare=False)
+    # Last: below it, `field` in this class body would name this attribute, not dataclasses.field.
+    field: FieldSpec = dataclasses.field(default_factory=FieldSpec, metadata=HASH_NEVER)
 
     def __post_init__(self) -> None:
         require(bool(re.fullmatch(r"[A-Za-z0-9_.-]+", self.name)), "name",

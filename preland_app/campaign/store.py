@@ -242,6 +242,21 @@ class ResultsStore:
             rows.append(data)
         return rows
 
+    # ---------------------------------------------------------------- field campaigns
+
+    def log_field(self, campaign: str, kind: str, *, scenario: str | None = None, trial_index: int | None = None,
+                  data: dict[str, Any] | None = None) -> None:
+        """Append one entry to a field campaign's journal (`field_log`), committed at once."""
+        with self._transaction() as db:
+            db.execute("INSERT INTO field_log (campaign, kind, scenario, trial_index, data) VALUES (?, ?, ?, ?, ?)",
+                       (campaign, kind, scenario, trial_index, json.dumps(data or {}, sort_keys=True, default=str)))
+
+    def field_log(self, campaign: str) -> list[dict[str, Any]]:
+        """A field campaign's journal, oldest first: kind, scenario, trial_index, at (UTC), data."""
+        return [{**dict(row), "data": json.loads(row["data"])} for row in self.db.execute(
+            "SELECT kind, scenario, trial_index, at, data FROM field_log WHERE campaign = ? ORDER BY id",
+            (campaign,))]
+
     def events(self, trial_id: int) -> list[dict[str, Any]]:
         return [{**dict(row), "data": json.loads(row["data"])} for row in self.db.execute(
             "SELECT time_s, kind, message, data FROM events WHERE trial_id = ? ORDER BY rowid", (trial_id,))]

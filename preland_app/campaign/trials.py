@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..config.mission import MissionSpec
-from ..outcome import TRAJECTORY_COLUMNS, Outcome
+from ..outcome import TRAJECTORY_COLUMNS, Outcome, TrialOutcome
 from ..runtime.base import Runtime, TrialRequest
 from ..runtime.embedded import EmbeddedRuntime
 from .spec import CampaignSpec, ResolvedScenario
@@ -89,20 +89,33 @@ def run_job(job: TrialJob) -> TrialRecord:
     becomes an `error` outcome. A SITL trial without a binary of its own uses $PRELAND_SITL_BINARY of the
     machine it runs on."""
     started = time.perf_counter()
-    common = dict(campaign=job.campaign, scenario=job.scenario, scenario_index=job.scenario_index,
-                  trial_index=job.trial_index, seed=job.seed, spec_hash=job.spec_hash)
+    outcome = fly_job(job)
+    if isinstance(outcome, str):
+        return error_record(job, outcome, wall_time_s=time.perf_counter() - started)
+    return outcome_record(job, outcome, wall_time_s=time.perf_counter() - started)
+
+
+def fly_job(job: TrialJob) -> TrialOutcome | str:
+    """Fly one trial on the job's runtime: its outcome, or the message of the error that stopped it (a bug
+    in a trial is that trial's outcome; the campaign goes on)."""
     request = TrialRequest(mission=job.mission, seed=job.seed, takeoff_altitude_rel_m=job.takeoff_altitude_rel_m,
                            record_trajectory=not job.outcomes_only)
-    runtime = job.runtime.name
     try:
         # A runtime sent without a binary of its own finds it on the machine the trial runs on.
-        outcome = job.runtime.on_this_machine().fly(
+        return job.runtime.on_this_machine().fly(
             request, tlog_name=f"{job.campaign}_s{job.scenario_index}_t{job.trial_index}.tlog")
-    except Exception as error:  # a bug in a trial is that trial's outcome; the campaign goes on
+    except Exception as error:
         last = traceback.extract_tb(error.__traceback__)[-1] if error.__traceback__ else None
         where = f" at {Path(last.filename).name}:{last.lineno}" if last else ""
-        return error_record(job, f"{type(error).__name__}: {error}{where}",
-                            wall_time_s=time.perf_counter() - started)
+        return f"{type(error).__name__}: {error}{where}"
+
+
+def outcome_record(job: TrialJob, outcome: TrialOutcome, *, wall_time_s: float | None,
+                   source: str | None = None) -> TrialRecord:
+    """The record of a flown trial (`source`: what its figures are, default the runtime's)."""
+    common = dict(campaign=job.campaign, scenario=job.scenario, scenario_index=job.scenario_index,
+                  trial_index=job.trial_index, seed=job.seed, spec_hash=job.spec_hash, runtime=job.runtime.name,
+                  source=source or job.source, wall_time_s=wall_time_s)
     data = outcome.to_dict(include_events=not job.outcomes_only)
     land = job.mission.land
     result = {key: data.get(key) for key in data if key != "events"}
@@ -110,11 +123,9 @@ def run_job(job: TrialJob) -> TrialRecord:
     result["faults"] = ", ".join(f"{s} {f}" for s, f in sorted(land.faults.items())) or "none"
     result["takeoff_altitude_m"] = data["takeoff_altitude_rel_m"]
     if job.outcomes_only:
-        return TrialRecord(**common, result=result, runtime=runtime, source=job.source,
-                           wall_time_s=time.perf_counter() - started)
+        return TrialRecord(**common, result=result)
     return TrialRecord(**common, result=result, events=tuple(data["events"]),
-                       trajectory_columns=TRAJECTORY_COLUMNS, trajectory_rows=_downsample(outcome.trajectory),
-                       runtime=runtime, source=job.source, wall_time_s=time.perf_counter() - started)
+                       trajectory_columns=TRAJECTORY_COLUMNS, trajectory_rows=_downsample(outcome.trajectory))
 
 
 def error_record(job: TrialJob, message: str, *, wall_time_s: float | None = None) -> TrialRecord:

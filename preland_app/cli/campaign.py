@@ -16,6 +16,31 @@ from .app import EXIT_FAILED, app, choices, fail, progress_bar
 # so they are what it holds then.
 Executor = choices("preland_app.campaign.executors:executor_names")
 
+EXIT_PAUSED = 3  # a field campaign stopped at a pause: --resume goes on
+
+
+def _field_options(runtime, *, measure: str | None, answers: Path | None, order: str | None, quiet: bool) -> dict:
+    """The field campaign's options for `api.run_campaign` (none unless the runtime flies a vehicle): the
+    operator at this terminal (or the answers file), the status lines, measure and order as given."""
+    given = {"measure": measure, "answers": str(answers) if answers is not None else None, "order": order}
+    if runtime is None or not getattr(runtime, "flies_a_vehicle", False):
+        for name, value in given.items():
+            if value is not None:
+                raise fail(f"--{name}: only for a field campaign, on a vehicle (--runtime mavlink+...)")
+        return {}
+    import sys
+
+    from ..field.operator import TerminalOperator
+
+    options = {name: value for name, value in given.items() if value is not None}
+    options["status"] = (lambda status: None) if quiet else (lambda status: typer.echo(status.line(), err=True))
+    if answers is None and sys.stdin.isatty():
+        options["operator"] = TerminalOperator(ask=lambda prompt: typer.prompt(prompt, default="",
+                                                                                show_default=False),
+                                               say=lambda line: typer.echo(line, err=True))
+    return options
+
+
 campaign_app = typer.Typer(help="Campaigns: run repeated trials into a results store; list, report, compare, "
                                 "export, browse or delete what it holds.", no_args_is_help=True)
 app.add_typer(campaign_app, name="campaign")
@@ -61,6 +86,26 @@ def campaign_run(
     paced: bool = typer.Option(False, "--paced", rich_help_panel="MAVLink runtime (mavlink+..., a vehicle)",
                                help="The vehicle is preland sim serve: fly in lock-step with it (PRELAND_PACE), "
                                     "every sensor reading at its vehicle time however loaded the machine is."),
+    camera_source: Optional[str] = typer.Option(
+        None, "--camera", metavar="SRC", rich_help_panel="MAVLink runtime (mavlink+..., a vehicle)",
+        help="A real camera (index, device, GStreamer pipeline) or a video file instead of the virtual camera."),
+    fault_listen: Optional[str] = typer.Option(
+        None, "--fault-listen", metavar="UDP:HOST:PORT", rich_help_panel="MAVLink runtime (mavlink+..., a vehicle)",
+        help="Accept the thesis' fault command (preland fault send) here while each trial flies."),
+    measure: Optional[str] = typer.Option(
+        None, "--measure", metavar="operator|vehicle|truth", rich_help_panel="Field campaign (mavlink+..., a vehicle)",
+        help="Where each landing's error comes from: operator (asked after each landing, or --answers), vehicle "
+             "(its RTK position against the campaign's field.pad), truth (a simulated vehicle's ground truth). "
+             "Default: truth on a vehicle that reports it (sim serve, SITL) unless --answers is given, else "
+             "operator."),
+    answers: Optional[Path] = typer.Option(
+        None, "--answers", rich_help_panel="Field campaign (mavlink+..., a vehicle)",
+        help="The operator's answers from a CSV file (scenario,trial,error_cm,x_cm,y_cm; error_cm a number, skip, "
+             "redo or abort), for rehearsals: a pause then stops the campaign for --resume."),
+    order: Optional[str] = typer.Option(
+        None, "--order", metavar="campaign|shuffled", rich_help_panel="Field campaign (mavlink+..., a vehicle)",
+        help="The trials in the campaign's order (default) or shuffled with its base seed (the same order on "
+             "every --resume)."),
     executor: Executor = typer.Option("local", "--executor", help="Where trials run: local (worker processes "
                                       "on this machine), ray (tasks of a Ray cluster) or a registered one."),
     ray_address: Optional[str] = typer.Option(None, "--ray-address", metavar="ADDR",
@@ -81,6 +126,7 @@ def campaign_run(
     from ..campaign.lease import CampaignBusy
     from ..campaign.spec import load_campaign
     from ..runtime.base import RuntimeOptionError
+    from ..field.campaign import FieldCampaignPaused
     from .fly import choose_runtime, runtime_option_line
 
     try:
@@ -100,7 +146,8 @@ def campaign_run(
     given = {"speedup": sitl_speedup, "defaults": tuple(p.resolve() for p in sitl_defaults) or None,
              "physics": sitl_physics,
              "tlog_dir": str(tlog_dir.resolve()) if tlog_dir else None, "truth": False if no_truth else None,
-             "preflight": False if no_preflight else None, "paced": True if paced else None}
+             "preflight": False if no_preflight else None, "paced": True if paced else None,
+             "fault_listen": fault_listen, "camera_source": camera_source}
     options = {name: value for name, value in given.items() if value is not None}
     chosen = choose_runtime(runtime if runtime is not None or sitl is not None else campaign.runtime,
                             connect=None, sitl=sitl, options=options) \
@@ -109,8 +156,9 @@ def campaign_run(
     target = chosen if chosen is not None else api.runtime_url(runtime, sitl=sitl)
     started = time.perf_counter()
     failures: list[str] = []
+    field_options = _field_options(chosen, measure=measure, answers=answers, order=order, quiet=quiet)
     try:
-        with progress_bar(enabled=not quiet) as advance:
+        with progress_bar(enabled=not quiet and not field_options) as advance:
             def progress(done: int, total: int, record) -> None:
                 advance(done, total)
                 if record is not None and record.result.get("outcome") == "error":
@@ -119,9 +167,15 @@ def campaign_run(
             run = api.run_campaign(campaign, db=db, workers=workers, resume=resume, runtime=target,
                                    options=options if chosen is None else None,
                                    progress=progress, executor=executor, ray_address=ray_address,
-                                   trial_cpus=trial_cpus, outcomes_only=outcomes_only)
+                                   trial_cpus=trial_cpus, outcomes_only=outcomes_only, **field_options)
     except CampaignInterrupted as error:
         typer.echo(f"preland: {error}", err=True)
+        raise typer.Exit(130) from None
+    except FieldCampaignPaused as error:
+        typer.echo(f"preland: {error}", err=True)
+        raise typer.Exit(EXIT_PAUSED) from None
+    except KeyboardInterrupt:  # a field campaign, between or during its flights: what is stored stays
+        typer.echo("preland: interrupted; run again with --resume to go on", err=True)
         raise typer.Exit(130) from None
     except CampaignBusy as error:
         raise fail(str(error), code=EXIT_FAILED) from None

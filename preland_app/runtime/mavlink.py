@@ -37,6 +37,7 @@ from .sensors import build_sensor_suite
 from .recorder import TrajectoryRecorder
 
 ON_GROUND_M = 0.05
+FINAL_STATE_WAIT_S = 2.0  # wall seconds for the last telemetry read of a trial
 T = TypeVar("T")
 
 
@@ -175,6 +176,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
             listener.close()
         for keeper in kept:
             keeper.close()
+        final_state = await _final_state(vehicle)
         await vehicle.close()
     trajectory = recorder.array()
     command = events.first("land_handover")
@@ -195,6 +197,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     score, landing_time_s, flight_time_s = scored.score, scored.landing_time_s, scored.flight_time_s
     details = dict(runner.report.landing.details) if runner.report.landing else {}
     details["runtime"] = "mavlink"
+    details.update(final_state)
     details["clock_rate"] = round(clock.rate, 2)
     if paced:
         details["paced_grants"] = clock.grants
@@ -218,6 +221,19 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         offset_east_cm=score.offset_east_cm if score else None,
         landing_time_s=landing_time_s, flight_time_s=flight_time_s, details=details, events=tuple(events.events),
         trajectory=trajectory)
+
+
+async def _final_state(vehicle: MavlinkVehicle) -> dict[str, Any]:
+    """Where the vehicle ended the trial and its battery, as it reports them (for a field campaign: the
+    touchdown by RTK, the battery swap), or nothing from a vehicle that no longer answers."""
+    try:
+        telemetry = await asyncio.wait_for(vehicle.telemetry(), timeout=FINAL_STATE_WAIT_S)
+    except (PrelandError, asyncio.TimeoutError):
+        return {}
+    position = telemetry.global_position
+    return {"final_latitude_deg": position.latitude_deg, "final_longitude_deg": position.longitude_deg,
+            "battery_remaining_pct": telemetry.battery.remaining_pct,
+            "battery_voltage_v": round(telemetry.battery.voltage_v, 2)}
 
 
 def _failed(task: asyncio.Future) -> bool:
@@ -299,6 +315,7 @@ class MavlinkRuntime:
     simulated_world: ClassVar[bool] = False
     max_workers: ClassVar[int | None] = 1
     cluster_resource: ClassVar[str | None] = None
+    flies_a_vehicle: ClassVar[bool] = True  # a campaign on it is a field campaign (`preland_app.field.campaign`)
     endpoint: Endpoint
     options: MavlinkOptions = field(default_factory=MavlinkOptions)
 

@@ -141,7 +141,10 @@ def _quiet_mavsdk_logs() -> None:
     from mavsdk.logging import LogLevel, log_subscribe
 
     def handler(level: LogLevel, message: str, file: str | None, line: int) -> bool:
-        return level < LogLevel.WARN  # True suppresses MAVSDK's default printing
+        # True suppresses MAVSDK's default printing. "Sending message failed" comes with every new TCP link
+        # to ArduPilot (a heartbeat sent before the socket is up); a link that really fails is preland's to
+        # report (LinkLost), in one line.
+        return level < LogLevel.WARN or message.startswith("Sending message failed")
 
     log_subscribe(handler)
 
