@@ -205,7 +205,8 @@ class SwappingOperator:
 
 
 def test_a_low_battery_pauses_at_the_next_landing_and_the_campaign_goes_on_after_the_swap(tmp_path):
-    campaign = _campaign(tmp_path, "trials: 2\nfield: {battery_swap_pct: 35}\nscenarios: [{label: gps, land: normal}]\n")
+    campaign = _campaign(tmp_path, "trials: 2\nfield: {battery_swap_pct: 35, between_trials: operator}\n"
+                                   "scenarios: [{label: gps, land: normal}]\n")
     db = tmp_path / "battery.db"
     served = _served(paced=True)
     capacity_mah = served.simulator.environment.airframe.battery_capacity_mah
@@ -217,8 +218,10 @@ def test_a_low_battery_pauses_at_the_next_landing_and_the_campaign_goes_on_after
     finally:
         served.stop()
     assert (run.ran, run.total) == (2, 2)
-    assert [pause for pause, _ in operator.pauses] == [Pause.BATTERY]
+    # The swap first, then the operator carries the vehicle back for the next trial.
+    assert [pause for pause, _ in operator.pauses] == [Pause.BATTERY, Pause.CARRY_BACK]
     assert operator.pauses[0][1].endswith("% is below the swap threshold 35 %: swap it")
+    assert operator.pauses[1][1] == "carry the vehicle back to the start for gps #1"
     first, second = _trials(db)
     assert first["details"]["battery_remaining_pct"] < 35 <= second["details"]["battery_remaining_pct"]
     assert all(r["source"] == "sim" and r["details"]["measured_by"] == "truth" for r in (first, second))
