@@ -398,3 +398,29 @@ def test_a_field_campaign_that_cannot_fly_as_asked_is_refused_before_it_connects
                                       "--runtime", "mavlink+udpout://127.0.0.1:9", *args])
     assert result.exit_code == 2, result.output
     assert result.output.strip() == "preland: error: " + line.format(campaign=campaign)
+
+
+def test_a_preflight_refusal_pauses_without_a_trial_and_the_trial_flies_after_the_fix(tmp_path):
+    campaign = _campaign(tmp_path, "trials: 1\nscenarios: [{label: ir, land: irlock}]\n")
+    db = tmp_path / "refused.db"
+    served = ServedSimulator(preland.load_mission(THESIS_MISSION), seed=2, paced=True)  # PLND_* still 0
+    args = ["campaign", "run", campaign, "--db", str(db), "--runtime", _url(served), "--paced", "--quiet"]
+    try:
+        paused = CliRunner().invoke(app, args)
+        stored_while_paused = _trials(db)
+
+        def set_plnd(simulator):
+            simulator.params.set("PLND_ENABLED", 1)
+            simulator.params.set("PLND_TYPE", 1)
+
+        _on_face(served, set_plnd)
+        resumed = CliRunner().invoke(app, [*args, "--resume"])
+    finally:
+        served.stop()
+    assert paused.exit_code == 3, paused.output
+    assert "preland: paused: preflight: PLND_ENABLED is 0, must be 1" in paused.output
+    assert stored_while_paused == []
+    assert resumed.exit_code == 0, resumed.output
+    (row,) = _trials(db)
+    assert row["outcome"] == "landed" and row["details"]["attempt"] == 1 and "reflown_after" not in row["details"]
+    assert [e["kind"] for e in _journal(db)] == ["start", "flight", "refused", "paused", "flight"]

@@ -166,7 +166,8 @@ class FieldCampaign:
                 if number > 0 or self.resume:
                     self._ensure_landed(job)
                     self._back_to_start(job)
-                self._fly_until_recorded(job, interrupted=job.key in interrupted, last=number == len(pending) - 1)
+                self._fly_until_recorded(job, reflown_after=interrupted.get(job.key, []),
+                                         last=number == len(pending) - 1)
                 ran += 1
                 lease.refresh(force=True)
             return ran, self.total
@@ -192,30 +193,29 @@ class FieldCampaign:
 
     # ---------------------------------------------------------------- the journal
 
-    def _note_interrupted(self, done_keys: set[tuple[str, int]]) -> set[tuple[str, int]]:
-        """Flights the journal shows started but whose trial is not stored (the campaign was killed
-        mid-flight): each gets an `interrupted` entry once, and is flown again."""
-        started: dict[tuple[str, int], int] = {}
-        noted: set[tuple[str, int]] = set()
+    def _note_interrupted(self, done_keys: set[tuple[str, int]]) -> dict[tuple[str, int], list[str]]:
+        """Why each unstored trial with a flight in the journal is flown again: a flight started and never
+        ended (the campaign was killed mid-flight) gets an `interrupted` entry, once; a trial whose last entry
+        is a `redo` was stopped before it was flown again. A flight that a preflight check refused is none."""
+        last: dict[tuple[str, int], tuple[str, int]] = {}  # key -> (kind, attempt) of its newest entry
         for entry in self.store.field_log(self.campaign.name):
-            key = (entry["scenario"], entry["trial_index"])
-            if entry["kind"] == "flight":
-                started[key] = entry["data"].get("attempt", 1)
-            elif entry["kind"] in ("redo", "interrupted", "refused"):
-                noted.add((key, started.get(key)))
-        interrupted = set()
-        for key, attempt in started.items():
-            if key in done_keys:
+            if entry["kind"] in ("flight", "redo", "interrupted", "refused"):
+                last[(entry["scenario"], entry["trial_index"])] = (entry["kind"], entry["data"].get("attempt", 1))
+        reasons: dict[tuple[str, int], list[str]] = {}
+        for key, (kind, attempt) in last.items():
+            if key in done_keys or kind == "refused":
                 continue
-            interrupted.add(key)
-            if (key, attempt) not in noted:
+            if kind == "flight":
                 self.store.log_field(self.campaign.name, "interrupted", scenario=key[0], trial_index=key[1],
                                      data={"attempt": attempt})
-        return interrupted
+            reasons[key] = ["redo"] if kind == "redo" else ["interrupted"]
+        return reasons
 
     def _attempts(self, job: TrialJob) -> int:
-        return sum(1 for entry in self.store.field_log(self.campaign.name)
-                   if entry["kind"] == "flight" and (entry["scenario"], entry["trial_index"]) == job.key)
+        """Flights of `job` so far, not counting take-offs a preflight check refused."""
+        kinds = [entry["kind"] for entry in self.store.field_log(self.campaign.name)
+                 if (entry["scenario"], entry["trial_index"]) == job.key]
+        return kinds.count("flight") - kinds.count("refused")
 
     # ---------------------------------------------------------------- the vehicle between flights
 
@@ -314,10 +314,9 @@ class FieldCampaign:
 
     # ---------------------------------------------------------------- one trial
 
-    def _fly_until_recorded(self, job: TrialJob, *, interrupted: bool, last: bool) -> None:
+    def _fly_until_recorded(self, job: TrialJob, *, reflown_after: list[str], last: bool) -> None:
         """Fly `job` until a record of it is stored (a preflight refusal or a `redo` flies it again); unless
         it is the `last` to fly, a low battery then pauses for a swap."""
-        reflown_after = ["interrupted"] if interrupted else []
         while True:
             attempt = self._attempts(job) + 1
             self.store.log_field(self.campaign.name, "flight", scenario=job.scenario, trial_index=job.trial_index,
