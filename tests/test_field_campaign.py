@@ -424,3 +424,24 @@ def test_a_preflight_refusal_pauses_without_a_trial_and_the_trial_flies_after_th
     (row,) = _trials(db)
     assert row["outcome"] == "landed" and row["details"]["attempt"] == 1 and "reflown_after" not in row["details"]
     assert [e["kind"] for e in _journal(db)] == ["start", "flight", "refused", "paused", "flight"]
+
+
+def test_abort_keeps_the_landed_trial_as_not_measured_and_stops_until_resumed(tmp_path):
+    campaign = _campaign(tmp_path, "trials: 2\nscenarios: [{label: gps, land: normal}]\n")
+    answers = _answers(tmp_path, "gps,0,abort,,\ngps,1,7.5,,\n")
+    db = tmp_path / "abort.db"
+    served = _served(paced=True)
+    args = ["campaign", "run", campaign, "--db", str(db), "--runtime", _url(served), "--paced", "--quiet",
+            "--answers", answers]
+    try:
+        aborted = CliRunner().invoke(app, args)
+        resumed = CliRunner().invoke(app, [*args, "--resume"])
+    finally:
+        served.stop()
+    assert aborted.exit_code == 3, aborted.output
+    assert "preland: aborted by the operator after the landing (stored as not measured); 1 of 2" \
+        in aborted.output
+    assert resumed.exit_code == 0, resumed.output
+    first, second = _trials(db)
+    assert (first["outcome"], first["landing_error_cm"], first["details"]["measured"]) == ("landed", None, False)
+    assert first["details"]["not_measured_because"] == "aborted" and second["landing_error_cm"] == 7.5

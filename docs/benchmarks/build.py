@@ -19,7 +19,8 @@ RESULTS = BENCHMARKS / "results"
 NOT_BENCHMARKS = {"record.py"}
 # Figures about results first (they are what a reader compares with the sources), then speed.
 RESULT_SCRIPTS = ("fault_scenarios_table.py", "land_modes_table.py", "normal_landing_table.py", "paper_table.py",
-                  "error_budget.py", "drop_rate_sensitivity.py", "drop_cost_witnesses.py", "fault_kinds.py",
+                  "error_budget.py", "drop_rate_sensitivity.py", "drop_cost_witnesses.py", "sitl_witness.py",
+                  "fault_kinds.py",
                   "detector_variants.py",
                   "sitl_vs_embedded.py",
                   "json_bridge_hover.py", "sitl_air.py", "sitl_lockstep.py")

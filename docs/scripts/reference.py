@@ -120,7 +120,8 @@ def cli_page() -> str:
     out = [GENERATED, "# Command line\n",
            "Every command of `preland`, as `preland COMMAND --help` prints it. Bad input (a malformed file, "
            "an unknown choice, a value out of range) ends in one line naming the file, field or option and "
-           "the problem, with exit code 2; a run that fails exits 1.\n"]
+           "the problem, with exit code 2; a run that fails exits 1; a campaign stopped by Ctrl-C exits 130, and "
+           "a field campaign stopped at a pause exits 3 (both go on with `--resume`).\n"]
     _cli_section(["preland"], command, ctx, out)
     return "\n".join(out)
 
