@@ -35,9 +35,10 @@ def square_trial(thesis_mission):
 # long file collected late runs alone at the end while the other workers idle. xdist starts each of the 4
 # workers on two files, the first four and the next four in turn: the longest is paired with the shortest of
 # those. Any file not named keeps its place after these.
-LONGEST_FIRST = ("test_campaign_ray.py", "test_docs_tutorials.py", "test_mavlink_camera.py", "test_docs_site.py",
-                 "test_sitl.py", "test_runtimes.py", "test_mavlink_runtime.py", "test_sitl_failures.py",
-                 "test_roi_render.py", "test_campaign.py", "test_calibrate.py", "test_field_ops.py")
+LONGEST_FIRST = ("test_docs_tutorials.py", "test_campaign_ray.py", "test_field_campaign.py", "test_mavlink_camera.py",
+                 "test_mavlink_runtime.py", "test_docs_site.py", "test_calibrate.py", "test_sitl_failures.py",
+                 "test_sitl.py", "test_runtimes.py", "test_campaign_drivers.py", "test_roi_render.py",
+                 "test_campaign.py", "test_field_ops.py")
 
 
 def pytest_collection_modifyitems(session, config, items):
