@@ -20,14 +20,14 @@ import numpy as np
 
 from .clock import wait_until
 from .config.mission import MissionSpec
-from .errors import CommandDenied, LandModeFailed, MissionAborted, PrelandError, WaitTimeout
+from .errors import LandModeFailed, MissionAborted, PrelandError, WaitTimeout
 from .field.takeover import GuardedVehicle, PilotTakeover
 from .events import EventLog
 from .landing.base import LandingContext, LandingReport, LandStrategy
 from .landing.boundary import SensorFaults, as_sensor_view
 from .landing.plugins import where
 from .sensing.suite import SensorSuite
-from .vehicle.protocol import Vehicle
+from .vehicle.protocol import Vehicle, arm_when_allowed
 from .vehicle.types import FlightMode, PositionNed, Telemetry
 
 POLL_PERIOD_S = 0.1
@@ -248,16 +248,7 @@ class MissionRunner:
         return result
 
     async def _arm(self) -> None:
-        """Arm, retrying while the autopilot refuses (its checks may pass a moment later)."""
-        deadline_s = self.clock.now_s() + self.spec.timeouts.arm_s
-        while True:
-            try:
-                await self.vehicle.arm()
-                return
-            except CommandDenied:
-                if self.clock.now_s() >= deadline_s:
-                    raise
-                await self.clock.sleep(1.0)
+        await arm_when_allowed(self.vehicle, timeout_s=self.spec.timeouts.arm_s)
 
     async def _fly_to_waypoint(self, index: int, target: PositionNed) -> None:
         await self.vehicle.goto_ned(position_ned_m=target)

@@ -230,7 +230,8 @@ def test_a_low_battery_pauses_at_the_next_landing_and_the_campaign_goes_on_after
 
 
 def test_a_low_battery_stops_a_rehearsal_that_resumes_after_the_swap(tmp_path):
-    campaign = _campaign(tmp_path, "trials: 2\nfield: {battery_swap_pct: 35}\nscenarios: [{label: gps, land: normal}]\n")
+    campaign = _campaign(tmp_path, "trials: 2\nfield: {battery_swap_pct: 35}\n"
+                                   "scenarios: [{label: gps, land: normal}]\n")
     answers = _answers(tmp_path, "gps,0,12,,\ngps,1,14,,\n")
     db = tmp_path / "rehearsal.db"
     served = _served(paced=True)

@@ -193,11 +193,11 @@ def _verdicts(summaries, source: str) -> str:
     title = "### Tests per scenario" + ("" if source == "sim" else f": {WITNESSES[source]}")
     lines = ["", title, "",
              f"Each scenario's landing errors on {WITNESSES[source]} against its published trials: a two-sided "
-             f"Mann-Whitney U test, Holm-corrected across these {len(tests)} scenarios to a {ALPHA:.0%} family-wise error "
-             "(rejected: the adjusted p is below that). Area: the area between the two empirical CDFs (over: "
-             "the simulated errors lie above the field's), beside what a perfect model scores against as many "
-             "field draws. Landing times are tested the same way. Landed: the simulated trials that landed, "
-             "with the Clopper-Pearson 95 % interval.", "",
+             f"Mann-Whitney U test, Holm-corrected across these {len(tests)} scenarios to a {ALPHA:.0%} "
+             "family-wise error (rejected: the adjusted p is below that). Area: the area between the two "
+             "empirical CDFs (over: the simulated errors lie above the field's), beside what a perfect model "
+             "scores against as many field draws. Landing times are tested the same way. Landed: the simulated "
+             "trials that landed, with the Clopper-Pearson 95 % interval.", "",
              "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for t in tests:
         low, high = clopper_pearson(t.sim_landed, t.sim_trials)

@@ -128,11 +128,12 @@ def outcome_record(job: TrialJob, outcome: TrialOutcome, *, wall_time_s: float |
                        trajectory_columns=TRAJECTORY_COLUMNS, trajectory_rows=_downsample(outcome.trajectory))
 
 
-def error_record(job: TrialJob, message: str, *, wall_time_s: float | None = None) -> TrialRecord:
-    """The record of a trial that could not give an outcome of its own."""
+def error_record(job: TrialJob, message: str, *, wall_time_s: float | None = None,
+                 source: str | None = None) -> TrialRecord:
+    """The record of a trial that could not give an outcome of its own (`source` as for `outcome_record`)."""
     return TrialRecord(campaign=job.campaign, scenario=job.scenario, scenario_index=job.scenario_index,
                        trial_index=job.trial_index, seed=job.seed, spec_hash=job.spec_hash,
                        result={"outcome": Outcome.ERROR.value, "message": message, "mission": job.mission.name,
                                "land_mode": job.mission.land.mode, "details": {}},
-                       runtime=job.runtime.name, source=job.source,
+                       runtime=job.runtime.name, source=source or job.source,
                        wall_time_s=wall_time_s)

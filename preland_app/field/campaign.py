@@ -38,6 +38,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..campaign.driver import check_store
+from ..campaign.field_spec import BetweenTrials
 from ..campaign.lease import DriverLease
 from ..campaign.spec import CampaignSpec, resolve_scenarios
 from ..campaign.store import ResultsStore, TrialRecord
@@ -48,9 +49,9 @@ from ..outcome import Outcome, TrialOutcome
 from ..vehicle.mavlink_backend import MavlinkVehicle
 from .operator import Measurement, Operator, Pause, Verdict
 from .reposition import located, reposition
-from ..campaign.field_spec import BetweenTrials
 
 FIELD_SOURCE = "field"
+RECONNECT_RETRY_S = 2.0  # wall seconds between tries to reach a vehicle coming back from a swap
 LOCATE_TIMEOUT_S = 30.0  # vehicle seconds for a connected vehicle to report its position between flights
 
 
@@ -302,6 +303,7 @@ class FieldCampaign:
                 telemetry = self._read_vehicle()
             except PrelandError as error:
                 if time.monotonic() < deadline:
+                    time.sleep(RECONNECT_RETRY_S)  # a link that fails at once (no route yet) is not hammered
                     continue
                 self._pause(Pause.BATTERY, f"the vehicle did not come back within "
                                            f"{self.spec.reconnect_timeout_s:g} s ({error})", job)
@@ -326,8 +328,7 @@ class FieldCampaign:
             outcome = fly_job(job)
             wall_time_s = time.perf_counter() - started
             if isinstance(outcome, str):
-                record = error_record(job, outcome, wall_time_s=wall_time_s)
-                record = replace(record, source=self.source)
+                record = error_record(job, outcome, wall_time_s=wall_time_s, source=self.source)
                 self._store(job, record, attempt=attempt, reflown_after=reflown_after)
                 return
             self.battery_pct = outcome.details.get("battery_remaining_pct", self.battery_pct)
@@ -433,7 +434,6 @@ def _measured(record: TrialRecord, answer: Measurement, *, measure: Measure, tru
     measured = answer.verdict is Verdict.MEASURED
     details["measured"] = measured
     if answer.verdict is Verdict.ABORT:
-        details["measured"] = False
         details["not_measured_because"] = "aborted"
     result.update(landing_error_cm=answer.error_cm if measured else None,
                   offset_north_cm=answer.x_cm if measured else None,
@@ -455,7 +455,8 @@ def run_field_campaign(campaign: CampaignSpec, store: ResultsStore, *, runtime, 
     """Fly `campaign` on the one vehicle `runtime` flies (see the module's docstring). `measure`: operator,
     vehicle or truth (default: operator when answers are given or the vehicle reports no truth, else truth);
     `answers`: an answers file (a `ScriptedOperator`); `operator`: who is asked to measure and to act on
-    pauses (default, without answers: nobody, so a pause stops the campaign). Returns (trials stored now, trials in all)."""
+    pauses (default, without answers: nobody, so a pause stops the campaign). Returns (trials stored now,
+    trials in all)."""
     from .operator import ScriptedOperator, load_answers
 
     try:

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 from ..clock import wait_until
 from ..config.mission import MissionSpec
-from ..errors import CommandDenied, MissionAborted
+from ..errors import MissionAborted
 from ..geo import GeoPoint, LocalTangentPlane
-from ..vehicle.protocol import Vehicle
+from ..vehicle.protocol import Vehicle, arm_when_allowed
 from ..vehicle.types import FlightMode, Telemetry
 
 POLL_PERIOD_S = 0.1
@@ -83,15 +83,7 @@ async def reposition(*, vehicle: Vehicle, start: GeoPoint, mission: MissionSpec,
                 f"altitude {t.altitude_rel_m:.2f} m")
 
     await vehicle.set_mode(FlightMode.GUIDED)
-    deadline_s = clock.now_s() + timeouts.arm_s
-    while True:
-        try:
-            await vehicle.arm()
-            break
-        except CommandDenied:
-            if clock.now_s() >= deadline_s:
-                raise
-            await clock.sleep(1.0)
+    await arm_when_allowed(vehicle, timeout_s=timeouts.arm_s)
     await vehicle.takeoff(altitude_rel_m=altitude_m)
 
     async def at_altitude() -> bool:

@@ -3,8 +3,9 @@
 The built-in precision modes, the paper's algorithms and a plugin's sensor views all pass their values
 through a `FaultGate`, which drops a value, gives the sensor's last value again in its place, gives it an old
 time, puts a false target in its place, or holds it back until it arrives: one `FaultInjector` per sensor the
-mode uses, each drawing from a random stream of its own (spawned from the landing's generator in the order `streams` gives, so a mode's draws do not depend
-on the other sensor's), gated on the height above ground the vehicle reports and on the landing attempt.
+mode uses, each drawing from a random stream of its own (spawned from the landing's generator in the order
+`streams` gives, so a mode's draws do not depend on the other sensor's), gated on the height above ground the
+vehicle reports and on the landing attempt.
 
 A delayed value reaches its reader in one of two ways. A mode that pushes values to the autopilot
 (`apply`, then `arrival_s`) sends each at its own arrival time. One that reads its sensors at their ticks

@@ -37,7 +37,6 @@ from .sensors import build_sensor_suite
 from .recorder import TrajectoryRecorder
 
 ON_GROUND_M = 0.05
-FINAL_STATE_WAIT_S = 2.0  # wall seconds for the last telemetry read of a trial
 T = TypeVar("T")
 
 
@@ -224,16 +223,19 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
 
 
 async def _final_state(vehicle: MavlinkVehicle) -> dict[str, Any]:
-    """Where the vehicle ended the trial and its battery, as it reports them (for a field campaign: the
-    touchdown by RTK, the battery swap), or nothing from a vehicle that no longer answers."""
+    """Where the vehicle ended the trial and its battery, as it last reported them (for a field campaign: the
+    touchdown by RTK, the battery swap); nothing from a vehicle that no longer answers, and no position from
+    one that never reported it (0, 0 until GLOBAL_POSITION_INT arrives)."""
     try:
-        telemetry = await asyncio.wait_for(vehicle.telemetry(), timeout=FINAL_STATE_WAIT_S)
-    except (PrelandError, asyncio.TimeoutError):
+        telemetry = await vehicle.telemetry()
+    except PrelandError:
         return {}
+    state = {"battery_remaining_pct": telemetry.battery.remaining_pct,
+             "battery_voltage_v": round(telemetry.battery.voltage_v, 2)}
     position = telemetry.global_position
-    return {"final_latitude_deg": position.latitude_deg, "final_longitude_deg": position.longitude_deg,
-            "battery_remaining_pct": telemetry.battery.remaining_pct,
-            "battery_voltage_v": round(telemetry.battery.voltage_v, 2)}
+    if position.latitude_deg != 0.0 or position.longitude_deg != 0.0:
+        state.update(final_latitude_deg=position.latitude_deg, final_longitude_deg=position.longitude_deg)
+    return state
 
 
 def _failed(task: asyncio.Future) -> bool:

@@ -77,8 +77,8 @@ FALSE_OFFSET_MAX_M = 50.0  # farther, and a downward camera at landing heights w
 @dataclass(frozen=True)
 class FaultSpec:
     """One sensor's fault. `probability` for random, stale and stalestamp, and the long-run share of values
-    dropped for burst; `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values) for burst;
-    `delay_ms` and `jitter_ms` (milliseconds) for delay; `probability` and `offset_m` for false."""
+    dropped for burst; `keep`/`drop` counts for periodic; `height_m` for below/above; `burst_length` (values)
+    for burst; `delay_ms` and `jitter_ms` (milliseconds) for delay; `probability` and `offset_m` for false."""
 
     kind: FaultKind = FaultKind.NONE
     probability: float = 0.0

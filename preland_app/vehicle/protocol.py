@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import Protocol, runtime_checkable
 
 from ..clock import Clock
+from ..errors import CommandDenied
 from .types import FlightMode, LandingTarget, PositionNed, Telemetry, VelocityNed
 
 
@@ -97,3 +98,20 @@ class Vehicle(Protocol):
     async def send_landing_target(self, target: LandingTarget) -> None:
         """Send one landing-target measurement (the content of LANDING_TARGET)."""
         ...
+
+
+ARM_RETRY_PERIOD_S = 1.0  # vehicle seconds between tries while the autopilot refuses to arm
+
+
+async def arm_when_allowed(vehicle: Vehicle, *, timeout_s: float) -> None:
+    """Arm, trying again every ARM_RETRY_PERIOD_S while the autopilot refuses (its checks may pass a moment
+    later); the last CommandDenied after `timeout_s` vehicle seconds."""
+    deadline_s = vehicle.clock.now_s() + timeout_s
+    while True:
+        try:
+            await vehicle.arm()
+            return
+        except CommandDenied:
+            if vehicle.clock.now_s() >= deadline_s:
+                raise
+            await vehicle.clock.sleep(ARM_RETRY_PERIOD_S)
