@@ -67,8 +67,11 @@ STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 
 # HEARTBEAT arrives on MAVSDK's message stream, COMMAND_ACK on the command call's own: a HEARTBEAT sent
 # before an accepted mode change or arm/disarm can reach preland after that command's ACK. The commanded
 # state stands until a HEARTBEAT reports it, or for this many vehicle seconds after the ACK (heartbeats come
-# at 1 to 10 Hz, so any later one was sent after the change and is believed).
-COMMANDED_STATE_GRACE_S = 2.0
+# at 1 to 10 Hz, so any later one was sent after the change and is believed). The ACK is dated by the clock,
+# which reads a stalled message stream's newest stamp: behind the vehicle by the backlog, so a HEARTBEAT of that
+# backlog can look up to the backlog's length newer than the ACK. 5 s covers a 0.25 wall s backlog at 20x (at 2 s
+# a loaded CI run read stale GUIDED HEARTBEATs after a LAND as a pilot takeover, at 8x and at 20x).
+COMMANDED_STATE_GRACE_S = 5.0
 # A vehicle that sends nothing at all (no stamped message either) has its silence reckoned from wall time,
 # so at 8x the 5 vehicle s of link_timeout_s would be 0.6 wall s, and a stall of either process (a loaded
 # machine, a garbage collection) would read as a lost link. Such a link is lost only after this much wall time
