@@ -1,9 +1,11 @@
 """ArduCopter SITL flown on preland's motor-level quad X (JSON physics) beside ArduPilot's own `--model quad`.
 
 For each physics: start `arducopter` in a temporary folder (`-w`, copter.parm as defaults), wait for a
-position estimate, GUIDED, arm, take off to 5 m, hold 10 s, LAND; print whether it armed, took off and
-landed, the hover throttle (MOT_THST_HOVER as learned, and the mean motor output (PWM - 1000) / 1000
-in the hold), the largest altitude error in the hold and vehicle seconds per wall second. The JSON
+position estimate, GUIDED, arm, take off to 5 m, hold 10 s, step the GUIDED altitude target up to 10 m and
+back down to 5 m (12 vehicle s each), LAND; print whether it armed, took off and landed, the hover throttle
+(MOT_THST_HOVER as learned, and the mean motor output (PWM - 1000) / 1000 in the hold), the largest
+altitude error in the hold, each step's response (10-90 % rise time, overshoot, the time it settles within
+0.1 m, its fastest vertical speed) and vehicle seconds per wall second. The JSON
 physics is served by `JsonBridge` from a thread of this process. Every process started is stopped on
 every path.
 
@@ -36,6 +38,10 @@ HOME = "-35.363261,149.165230,584,353"  # ArduPilot's CMAC test site, SITL's usu
 MAVLINK_PORT = 14571
 TAKEOFF_ALT_M = 5.0
 HOLD_S = 10.0
+STEP_ALT_M = 10.0  # the climb step's target; the descent step returns to TAKEOFF_ALT_M
+STEP_S = 12.0  # vehicle seconds each step is watched
+SETTLED_M = 0.1
+POSITION_ONLY_MASK = 0b0000_1111_1111_1000  # SET_POSITION_TARGET_*: position only, no yaw
 # Parameters the JSON frame adds to copter.parm. copter.parm sets FRAME_TYPE 0 (plus), the frame of
 # `--model quad` (SIM_Frame.cpp: "quad" is quad_plus_motors); the JSON model is quad X (FRAME_TYPE 1,
 # AP_Motors::MOTOR_FRAME_TYPE_X). Mixed as plus, the X airframe's roll and pitch couple at 45 degrees
@@ -55,8 +61,53 @@ class FlightReport:
     motor_spread: float | None = None
     max_alt_error_m: float | None = None
     vehicle_s_per_wall_s: float | None = None
+    steps: dict[str, "StepResponse"] = field(default_factory=dict)
     failure: str = ""
     statustexts: list[str] = field(default_factory=list)
+
+
+@dataclass
+class StepResponse:
+    """An altitude step's response: from `start_m` to `target_m` (relative altitude, m), seen over STEP_S."""
+
+    start_m: float
+    target_m: float
+    trace: list[tuple[float, float]]  # (vehicle s since the step, relative altitude m)
+
+    def _crossing_s(self, share: float) -> float | None:
+        level = self.start_m + share * (self.target_m - self.start_m)
+        up = self.target_m > self.start_m
+        return next((t for t, alt in self.trace if (alt >= level if up else alt <= level)), None)
+
+    @property
+    def rise_s(self) -> float | None:
+        """10 to 90 % of the step (vehicle s)."""
+        t10, t90 = self._crossing_s(0.1), self._crossing_s(0.9)
+        return None if t10 is None or t90 is None else t90 - t10
+
+    @property
+    def overshoot_m(self) -> float | None:
+        if not self.trace:
+            return None
+        sign = 1.0 if self.target_m > self.start_m else -1.0
+        return max(0.0, max(sign * (alt - self.target_m) for _, alt in self.trace))
+
+    @property
+    def settled_s(self) -> float | None:
+        """From the step until the altitude stays within SETTLED_M of the target (vehicle s); None if it does
+        not within the watch."""
+        outside = [t for t, alt in self.trace if abs(alt - self.target_m) > SETTLED_M]
+        if not self.trace or (outside and outside[-1] >= self.trace[-1][0]):
+            return None
+        return outside[-1] if outside else 0.0
+
+    @property
+    def fastest_m_s(self) -> float | None:
+        """The fastest vertical speed over 5 samples at least 0.3 vehicle s apart (m/s)."""
+        # GLOBAL_POSITION_INT comes at about 10 Hz: a rate over 5 samples
+        window = [(self.trace[i], self.trace[i + 5]) for i in range(len(self.trace) - 5)]
+        rates = [abs(a1 - a0) / (t1 - t0) for (t0, a0), (t1, a1) in window if t1 - t0 >= 0.3]
+        return max(rates) if rates else None
 
 
 class Link:
@@ -171,12 +222,40 @@ def fly(link: Link, report: FlightReport, speedup: float, bridge: JsonBridge | N
     report.motor_spread = sum(spreads) / len(spreads) if spreads else None
     report.hover_model_command = sum(commands) / len(commands) if commands else None
     report.hover_learned = link.param("MOT_THST_HOVER")
+    for name, target_m in (("climb", STEP_ALT_M), ("descent", TAKEOFF_ALT_M)):
+        report.steps[name] = altitude_step(link, target_m, wall)
     mav.set_mode("LAND")
     report.landed = link.pump(wall(60), lambda s: not s.armed() and s.rel_alt_m() < 0.5)
     if not report.landed:
         report.failure = f"did not land and disarm (at {link.rel_alt_m():.2f} m, armed {link.armed()})"
     wall_s = time.monotonic() - started_wall
     report.vehicle_s_per_wall_s = (link.boot_s() - started_vehicle) / wall_s if wall_s > 0 else None
+
+
+def altitude_step(link: Link, target_m: float, wall) -> StepResponse:
+    """Send a GUIDED position target at the vehicle's latitude and longitude and `target_m` above home, and
+    record the relative altitude for STEP_S vehicle seconds."""
+    mav = link.mav
+    here = link.latest["GLOBAL_POSITION_INT"]
+    step = StepResponse(start_m=link.rel_alt_m(), target_m=target_m, trace=[])
+    started_s = link.boot_s()
+    mav.mav.set_position_target_global_int_send(
+        0, mav.target_system, mav.target_component, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        POSITION_ONLY_MASK, here.lat, here.lon, target_m, 0, 0, 0, 0, 0, 0, 0, 0)
+    deadline = time.monotonic() + wall(STEP_S)
+    while time.monotonic() < deadline:
+        msg = mav.recv_match(blocking=True, timeout=0.2)
+        if msg is None:
+            continue
+        link.latest[msg.get_type()] = msg
+        if msg.get_type() == "GLOBAL_POSITION_INT":
+            elapsed_s = msg.time_boot_ms / 1000.0 - started_s
+            if elapsed_s > STEP_S:
+                break
+            step.trace.append((elapsed_s, msg.relative_alt / 1000.0))
+        elif msg.get_type() == "STATUSTEXT":
+            link.report.statustexts.append(msg.text)
+    return step
 
 
 def run_one(binary: str, physics: str, speedup: float) -> FlightReport:
@@ -258,11 +337,20 @@ def main() -> None:
             ("motor output spread in hold", lambda r: fmt(r.motor_spread, ".3f")),
             ("model motor command in hold", lambda r: fmt(r.hover_model_command, ".3f")),
             ("max altitude error in hold (m)", lambda r: fmt(r.max_alt_error_m, ".3f")),
+            *[(f"{name} {start_m:g}->{target_m:g} m: {what}",
+               (lambda r, name=name, attribute=attribute, spec=spec:
+                fmt(getattr(r.steps[name], attribute), spec) if name in r.steps else "-"))
+              for name, start_m, target_m in (("climb", TAKEOFF_ALT_M, STEP_ALT_M),
+                                              ("descent", STEP_ALT_M, TAKEOFF_ALT_M))
+              for what, attribute, spec in (("10-90 % rise (s)", "rise_s", ".2f"),
+                                            ("overshoot (m)", "overshoot_m", ".3f"),
+                                            ("settled within 0.1 m (s)", "settled_s", ".2f"),
+                                            ("fastest vertical speed (m/s)", "fastest_m_s", ".2f"))],
             ("vehicle s per wall s", lambda r: fmt(r.vehicle_s_per_wall_s, ".2f")),
             ("failure", lambda r: r.failure.strip() or "-")]
     print(f"binary {args.binary}, --speedup {args.speedup:g}")
     for label, value in rows:
-        print(f"{label:32s}" + "".join(f"{value(r):>28s}" for r in reports))
+        print(f"{label:46s}" + "".join(f"{value(r):>26s}" for r in reports))
     for r in reports:
         if r.failure:
             print(f"STATUSTEXT ({r.physics}):")

@@ -3,8 +3,11 @@ and SITL's throughput and result stability across speedups.
 
 Part 1: every scenario of benchmarks/fault_scenarios_table.py, the same seeds on both runtimes (same
 weather, same faults, same mission): mean and maximum landing error (cm), mean landing time (s), and
-SITL / embedded ratios of each. A precision scenario "agrees" when the means are within 30 % or 3 cm,
-whichever is larger.
+SITL / embedded ratios of each, one table for each SITL physics asked for (`--physics`): `preland`,
+ArduPilot flying preland's multirotor, wind, sensors and camera in lock-step over SITL's JSON interface (the
+shared world: what differs from the embedded simulator is the autopilot), and `ardupilot`, SITL's own
+physics and sensors. A precision scenario "agrees" when the means are within 30 % or 3 cm, whichever is
+larger.
 
 Part 2: SITL trials per minute per core at several --speedup values (the marker scenario, the same seeds
 at every speedup), and the landing errors' change against the lowest speedup: SITL is not bit-exact
@@ -13,6 +16,7 @@ across speedups, so this measures how far results move.
 Needs an arducopter SITL binary: --sitl PATH or $PRELAND_SITL_BINARY.
 
 Usage: python benchmarks/sitl_vs_embedded.py [--seeds 10] [--workers 2] [--only LABEL,...]
+                                             [--physics preland,ardupilot]
                                              [--speedups 5,10,20,50] [--sweep-seeds 6] [--skip-compare]
                                              [--sweep-scenarios LABEL,...] [--skip-sweep]
 """
@@ -41,13 +45,15 @@ SWEEP_LABEL = "T3 marker"
 # so at a high speedup it processes fewer frames per vehicle second than the camera's 30.
 
 
-def _one(job: tuple[str, str, int, str, float]) -> tuple:
-    """(runtime, label, seed, outcome, error cm, landing time s, wall s)"""
+def _one(job: tuple[str, str, int, str, float | None]) -> tuple:
+    """(runtime, label, seed, outcome, error cm, landing time s, wall s, speedup, message, camera Hz);
+    runtime `embedded`, `sitl` (ArduPilot's physics) or `sitl-preland` (preland's, in lock-step)."""
     runtime, label, seed, binary, speedup = job  # speedup None: preland's default
     started = time.perf_counter()
     request = scenario_request(label, seed)
-    if runtime == "sitl":
-        outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup))
+    if runtime.startswith("sitl"):
+        physics = "preland" if runtime == "sitl-preland" else "ardupilot"
+        outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup, physics=physics))
     else:
         outcome = run_trial(request)
     frames = outcome.details.get("marker_frames")
@@ -64,42 +70,57 @@ def _fmt(value: float | None, width: int, digits: int = 1) -> str:
     return f"{'-':>{width}}" if value is None else f"{value:{width}.{digits}f}"
 
 
-def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup: float | None) -> None:
-    jobs = [(runtime, label, seed, binary, speedup) for label in labels for seed in range(seeds)
-            for runtime in ("sitl", "embedded")]
+def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup: float | None,
+            physics: list[str]) -> None:
+    sitl_runtimes = ["sitl-preland" if p == "preland" else "sitl" for p in physics]
+    jobs = [(runtime, label, seed, binary, speedup if runtime == "sitl" else None) for label in labels
+            for seed in range(seeds) for runtime in (*sitl_runtimes, "embedded")]
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
         results = list(pool.map(_one, jobs, chunksize=1))
-    at = "preland's default speedup (2x with a camera, else 10x)" if speedup is None else f"{speedup:g}x"
-    print(f"thesis scenarios, {seeds} seeds each, SITL at {at} beside the embedded simulator "
+    for runtime in sitl_runtimes:
+        _table(results, runtime=runtime, labels=labels, seeds=seeds, speedup=speedup)
+    print(f"wall time {time.perf_counter() - started:.0f} s with {workers} worker(s)")
+
+
+def _table(results: list[tuple], *, runtime: str, labels: list[str], seeds: int, speedup: float | None) -> None:
+    if runtime == "sitl-preland":
+        at = "on preland's physics in lock-step (the shared world)"
+    else:
+        at = "on ArduPilot's physics, " + ("at preland's default speedup (2x with a camera, else 10x)"
+                                            if speedup is None else f"at {speedup:g}x")
+    print(f"\nthesis scenarios, {seeds} seeds each, SITL {at} beside the embedded simulator "
           "(error cm, landing time s)")
     print(f"{'scenario':<22} {'SITL landed':>11} {'mean':>6} {'max':>6} {'time':>6}   {'emb landed':>10} {'mean':>6} "
           f"{'max':>6} {'time':>6}   {'mean x':>6} {'max x':>6} {'time x':>6}  agree  cam Hz SITL/emb")
+    agreed = judged = 0
     for label in labels:
         row = {}
-        for runtime in ("sitl", "embedded"):
-            rows = [r for r in results if r[0] == runtime and r[1] == label]
+        for name in (runtime, "embedded"):
+            rows = [r for r in results if r[0] == name and r[1] == label]
             errors = [r[4] for r in rows if r[3] == "landed" and r[4] is not None]
             times = [r[5] for r in rows if r[3] == "landed" and r[5] is not None]
-            row[runtime] = (sum(r[3] == "landed" for r in rows), len(rows), _mean(errors),
-                            max(errors) if errors else None, _mean(times),
-                            _mean([r[9] for r in rows if r[9] is not None]))
+            row[name] = (sum(r[3] == "landed" for r in rows), len(rows), _mean(errors),
+                         max(errors) if errors else None, _mean(times),
+                         _mean([r[9] for r in rows if r[9] is not None]))
             for r in rows:
                 if r[3] != "landed":
-                    print(f"  {runtime} {label} seed {r[2]}: {r[3]} {r[8]}")
-        s, e = row["sitl"], row["embedded"]
+                    print(f"  {name} {label} seed {r[2]}: {r[3]} {r[8]}")
+        s, e = row[runtime], row["embedded"]
 
         def ratio(a, b):
             return None if a is None or not b else a / b
 
         agree = ""
         if SCENARIOS[label][0] != "normal" and s[2] is not None and e[2] is not None:
+            judged += 1
+            agreed += abs(s[2] - e[2]) <= max(0.3 * e[2], 3.0)
             agree = "yes" if abs(s[2] - e[2]) <= max(0.3 * e[2], 3.0) else "NO"
         print(f"{label:<22} {s[0]:>7}/{s[1]:<3} {_fmt(s[2], 6)} {_fmt(s[3], 6)} {_fmt(s[4], 6)}   "
               f"{e[0]:>6}/{e[1]:<3} {_fmt(e[2], 6)} {_fmt(e[3], 6)} {_fmt(e[4], 6)}   "
               f"{_fmt(ratio(s[2], e[2]), 6, 2)} {_fmt(ratio(s[3], e[3]), 6, 2)} {_fmt(ratio(s[4], e[4]), 6, 2)}  {agree:<5}  "
               + ("" if s[5] is None else f"{s[5]:.1f}/{_fmt(e[5], 1)}"))
-    print(f"wall time {time.perf_counter() - started:.0f} s with {workers} worker(s)")
+    print(f"{agreed} of {judged} precision scenarios agree")
 
 
 def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int, label: str = SWEEP_LABEL) -> None:
@@ -137,6 +158,8 @@ def main() -> None:
     parser.add_argument("--speedup", type=float, default=None,
                         help="SITL speedup of the comparison (default: preland's, 2x with a camera, else 10x)")
     parser.add_argument("--only", default="", help="comma-separated scenario labels")
+    parser.add_argument("--physics", default="preland,ardupilot",
+                        help="comma-separated SITL physics compared with the embedded simulator: preland, ardupilot")
     parser.add_argument("--speedups", default="5,10,20,50")
     parser.add_argument("--sweep-seeds", type=int, default=6)
     parser.add_argument("--sweep-scenarios", default=f"{SWEEP_LABEL},T3 marker random0.5",
@@ -147,7 +170,11 @@ def main() -> None:
     binary = str(resolve_sitl_binary(args.sitl))
     labels = [label for label in SCENARIOS if not args.only or label in args.only.split(",")]
     if not args.skip_compare:
-        compare(binary=binary, labels=labels, seeds=args.seeds, workers=args.workers, speedup=args.speedup)
+        physics = args.physics.split(",")
+        if not set(physics) <= {"preland", "ardupilot"}:
+            parser.error(f"--physics: {args.physics!r}: each one of preland, ardupilot")
+        compare(binary=binary, labels=labels, seeds=args.seeds, workers=args.workers, speedup=args.speedup,
+                physics=physics)
     if not args.skip_sweep:
         for label in args.sweep_scenarios.split(","):
             sweep(binary=binary, speedups=[float(v) for v in args.speedups.split(",")], seeds=args.sweep_seeds,

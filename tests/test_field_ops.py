@@ -290,6 +290,63 @@ def test_a_heartbeat_sent_before_a_mode_change_but_read_after_its_ack_is_no_take
         heartbeat(FlightMode.STABILIZE, False, after_s=GuardedVehicle.CONFIRM_S)
 
 
+def test_a_heartbeat_read_after_its_commands_ack_on_the_message_stream_is_believed_however_late(monkeypatch):
+    """The message stream carries each COMMAND_ACK in the order the vehicle sent it: HEARTBEATs read before a
+    change's ACK there are of the old state however far the clock has run (a backlog of many vehicle seconds
+    at 20x), and the first one read after it tells the truth, so a real takeover is seen at once."""
+    from preland_app.field.takeover import GuardedVehicle, PilotTakeover
+    from preland_app.vehicle.mavlink_backend import (COMMANDED_STATE_GRACE_S, COMMANDED_STATE_LIMIT_S,
+                                                     MAV_CMD_DO_SET_MODE, MavlinkVehicle)
+
+    vehicle = MavlinkVehicle(url="udp://:14550")
+    clock = _SteppedClock()
+    vehicle._clock = clock
+    returned: dict[int, int] = {}
+
+    async def accepted(command, *params, operation, check=True):
+        returned[command] = returned.get(command, 0) + 1
+        return returned[command]
+
+    monkeypatch.setattr(vehicle, "_command", accepted)
+    monkeypatch.setattr(vehicle, "_check_link", lambda operation: None)
+
+    def read(name: str, fields: dict, after_s: float = 0.1):
+        clock.time_s += after_s
+        vehicle._direct = _OneMessage(name, fields)
+        asyncio.run(vehicle._listen())
+
+    def heartbeat(mode: FlightMode, after_s: float = 0.1):
+        read("HEARTBEAT", {"custom_mode": mode.value, "base_mode": 128}, after_s)
+        telemetry = asyncio.run(vehicle.telemetry())
+        guarded.check(telemetry)
+        return telemetry
+
+    def ack(command: int = MAV_CMD_DO_SET_MODE):
+        read("COMMAND_ACK", {"command": command, "result": 0}, after_s=0.0)
+
+    guarded = GuardedVehicle(vehicle)
+    asyncio.run(guarded.set_mode(FlightMode.GUIDED))
+    ack()  # the stream shows ACKs
+    assert heartbeat(FlightMode.GUIDED).mode is FlightMode.GUIDED
+    asyncio.run(guarded.set_mode(FlightMode.LAND))
+    # Its ACK returned, the stream still reads the backlog: well past the time grace, no takeover.
+    stale = [heartbeat(FlightMode.GUIDED, after_s=1.0) for _ in range(int(COMMANDED_STATE_GRACE_S) + 3)]
+    assert {t.mode for t in stale} == {FlightMode.LAND}
+    ack()
+    # The next HEARTBEAT was sent after the change: the vehicle is not in LAND, and that is the pilot's.
+    assert heartbeat(FlightMode.LOITER).mode is FlightMode.LOITER
+    with pytest.raises(PilotTakeover, match="mode LOITER, preland had set LAND"):
+        heartbeat(FlightMode.LOITER, after_s=GuardedVehicle.CONFIRM_S)
+
+    # An ACK the stream never shows is waited for COMMANDED_STATE_LIMIT_S at most.
+    vehicle._commanded_mode = None
+    guarded = GuardedVehicle(vehicle)
+    heartbeat(FlightMode.LOITER)
+    asyncio.run(guarded.set_mode(FlightMode.GUIDED))
+    assert heartbeat(FlightMode.LOITER, after_s=COMMANDED_STATE_LIMIT_S - 0.2).mode is FlightMode.GUIDED
+    assert heartbeat(FlightMode.LOITER, after_s=0.2).mode is FlightMode.LOITER
+
+
 def _vehicle_at_a_frozen_wall_time(monkeypatch, *, rate: float):
     """A MavlinkVehicle on a _SteppedClock at `rate` vehicle s per wall s, with wall time frozen at `now`:
     (vehicle, clock, now)."""

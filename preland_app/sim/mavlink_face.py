@@ -533,8 +533,9 @@ class MavlinkFace(GroundStationServices):
             if channel.peer_seen:
                 channel.mav.statustext_send(severity, text.encode("ascii", "replace")[:50])
 
-    def _ack(self, command: int, result: int) -> None:
-        self.mav.command_ack_send(command, result)
+    def _ack(self, message, result: int) -> None:
+        """COMMAND_ACK to `message`'s sender, addressed to it as ArduPilot's is (target_system/component)."""
+        self.mav.command_ack_send(message.command, result, 0, 0, message.get_srcSystem(), message.get_srcComponent())
 
     # ---------------------------------------------------------------- incoming
 
@@ -565,22 +566,22 @@ class MavlinkFace(GroundStationServices):
                     self.intervals_s[message_id] = interval_us / 1e6
             elif command == mavlink2.MAV_CMD_REQUEST_MESSAGE:
                 if not self.send_message(int(message.param1)):
-                    self._ack(command, _UNSUPPORTED)
+                    self._ack(message, _UNSUPPORTED)
                     return
             elif command == mavlink2.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
                 self.send_message(mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
             else:
-                self._ack(command, _UNSUPPORTED)
+                self._ack(message, _UNSUPPORTED)
                 return
         except CommandDenied as error:
             self._say(error.reason)
-            self._ack(command, _DENIED)
+            self._ack(message, _DENIED)
             return
         except (ValueError, KeyError) as error:
             self._say(str(error))
-            self._ack(command, _FAILED)
+            self._ack(message, _FAILED)
             return
-        self._ack(command, _ACCEPTED)
+        self._ack(message, _ACCEPTED)
 
     @staticmethod
     def _mode(custom_mode: int) -> FlightMode:

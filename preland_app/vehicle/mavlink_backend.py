@@ -65,13 +65,15 @@ _LANDED = {0: LandedState.UNDEFINED, 1: LandedState.ON_GROUND, 2: LandedState.IN
 STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 10, "ATTITUDE": 10, "EXTENDED_SYS_STATE": 5,
               "SYS_STATUS": 2, "GPS_RAW_INT": 2, "HOME_POSITION": 1, "DISTANCE_SENSOR": 10}
 # HEARTBEAT arrives on MAVSDK's message stream, COMMAND_ACK on the command call's own: a HEARTBEAT sent
-# before an accepted mode change or arm/disarm can reach preland after that command's ACK. The commanded
-# state stands until a HEARTBEAT reports it, or for this many vehicle seconds after the ACK (heartbeats come
-# at 1 to 10 Hz, so any later one was sent after the change and is believed). The ACK is dated by the clock,
-# which reads a stalled message stream's newest stamp: behind the vehicle by the backlog, so a HEARTBEAT of that
-# backlog can look up to the backlog's length newer than the ACK. 5 s covers a 0.25 wall s backlog at 20x (at 2 s
-# a loaded CI run read stale GUIDED HEARTBEATs after a LAND as a pilot takeover, at 8x and at 20x).
+# before an accepted mode change or arm/disarm can reach preland after that command's ACK (a backlog of the
+# message stream on a loaded machine holds seconds of vehicle time at 20x). The message stream carries the
+# COMMAND_ACK too, in the order the vehicle sent it: a HEARTBEAT read after it there was sent after the change.
+# So the commanded state stands until a HEARTBEAT reports it or one is read after its ACK on the stream. Where
+# the stream shows no COMMAND_ACK at all, it stands for COMMANDED_STATE_GRACE_S vehicle seconds after the ACK
+# (heartbeats come at 1 to 10 Hz, so any later one was sent after the change); and an ACK the stream never
+# shows is waited for COMMANDED_STATE_LIMIT_S at most.
 COMMANDED_STATE_GRACE_S = 5.0
+COMMANDED_STATE_LIMIT_S = 30.0
 # A vehicle that sends nothing at all (no stamped message either) has its silence reckoned from wall time,
 # so at 8x the 5 vehicle s of link_timeout_s would be 0.6 wall s, and a stall of either process (a loaded
 # machine, a garbage collection) would read as a lost link. Such a link is lost only after this much wall time
@@ -212,18 +214,25 @@ class _Commanded:
 
     value: Any
     acked_at_s: float  # vehicle time of the COMMAND_ACK
+    ack: tuple[int, int] | None = None  # (MAV_CMD, its n-th ACK on this link), to find it on the message stream
     confirmed: bool = False
 
     def confirm(self, heartbeat_value: Any) -> None:
         """Note a HEARTBEAT's value: once one reports the commanded value, HEARTBEATs alone tell."""
         self.confirmed = self.confirmed or heartbeat_value == self.value
 
-    def reported(self, heartbeat_value: Any, heard_s: float) -> Any:
+    def reported(self, heartbeat_value: Any, heard_s: float, heartbeats_after_ack: int | None) -> Any:
         """What the vehicle is taken to be in, given the newest HEARTBEAT's `heartbeat_value`, sent at vehicle
-        time `heard_s`."""
-        if self.confirmed or heard_s - self.acked_at_s >= COMMANDED_STATE_GRACE_S:
+        time `heard_s`; `heartbeats_after_ack`: HEARTBEATs read after this command's ACK on the message
+        stream, or None where the stream shows no ACKs."""
+        if self.confirmed:
             return heartbeat_value
-        return self.value
+        elapsed_s = heard_s - self.acked_at_s
+        if heartbeats_after_ack is None:
+            after = elapsed_s >= COMMANDED_STATE_GRACE_S
+        else:
+            after = heartbeats_after_ack > 0 or elapsed_s >= COMMANDED_STATE_LIMIT_S
+        return heartbeat_value if after else self.value
 
 
 class MavlinkVehicle:
@@ -273,6 +282,9 @@ class MavlinkVehicle:
         # An accepted arm/disarm or mode change holds until a HEARTBEAT confirms it (COMMANDED_STATE_GRACE_S).
         self._commanded_armed: _Commanded | None = None
         self._commanded_mode: _Commanded | None = None
+        self._acks_returned: dict[int, int] = {}  # MAV_CMD -> COMMAND_ACKs its calls have returned
+        self._acks_streamed: dict[int, list[int]] = {}  # MAV_CMD -> per ACK on the message stream, HEARTBEATs before
+        self._heartbeats_read = 0
 
     @property
     def clock(self) -> VehicleTimeClock | PacedClock | LockstepClock:
@@ -383,7 +395,10 @@ class MavlinkVehicle:
                 self._last_heartbeat_wall = self._last_message_wall
                 self._heartbeat_stamp_s = self._clock.newest_s
                 self._last_heartbeat_vehicle_s = self.clock.now_s()
+                self._heartbeats_read += 1
                 self._heartbeat_confirms(fields)
+            elif name == "COMMAND_ACK":
+                self._acks_streamed.setdefault(int(fields.get("command", -1)), []).append(self._heartbeats_read)
             elif name == "PARAM_VALUE":
                 self._param_receipts += 1
                 param_id = str(fields.get("param_id", "")).rstrip("\x00")
@@ -502,11 +517,13 @@ class MavlinkVehicle:
         await self._direct.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
                                                        target_component_id=1, fields_json=json.dumps(payload)))
 
-    async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> None:
+    async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
+        """Send COMMAND_LONG and await its COMMAND_ACK: which ACK of `command` it was on this link (1, 2, ...),
+        or None without one (`check=False`)."""
         with self._exchanging():
-            await self._command_now(command, *params, operation=operation, check=check)
+            return await self._command_now(command, *params, operation=operation, check=check)
 
-    async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> None:
+    async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         values = list(params) + [0.0] * (7 - len(params))
@@ -520,25 +537,27 @@ class MavlinkVehicle:
         except Exception as error:
             if check:
                 raise LinkLost(operation=operation, reason=f"no COMMAND_ACK ({error})") from None
-            return
+            return None
+        self._acks_returned[command] = number = self._acks_returned.get(command, 0) + 1
         result = json.loads(ack.fields_json or "{}").get("result", 0)
         if check and result != 0:
             await asyncio.sleep(0.05)  # ArduPilot sends its reason as STATUSTEXT around the ack
             reasons = [t for t in self._status_texts[texts_before:] if t]
             raise CommandDenied(operation=operation,
                                 reason=reasons[-1] if reasons else f"MAV_RESULT {result}")
+        return number
 
     # ---------------------------------------------------------------- the protocol
 
     async def arm(self) -> None:
         self._check_link("arm")
-        await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 1, operation="arm")
-        self._commanded_armed = _Commanded(True, self.clock.now_s())
+        number = await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 1, operation="arm")
+        self._commanded_armed = self._commanded(True, MAV_CMD_COMPONENT_ARM_DISARM, number)
 
     async def disarm(self) -> None:
         self._check_link("disarm")
-        await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 0, operation="disarm")
-        self._commanded_armed = _Commanded(False, self.clock.now_s())
+        number = await self._command(MAV_CMD_COMPONENT_ARM_DISARM, 0, operation="disarm")
+        self._commanded_armed = self._commanded(False, MAV_CMD_COMPONENT_ARM_DISARM, number)
 
     async def takeoff(self, *, altitude_rel_m: float) -> None:
         self._check_link("takeoff")
@@ -546,8 +565,20 @@ class MavlinkVehicle:
 
     async def set_mode(self, mode: FlightMode) -> None:
         self._check_link("set_mode")
-        await self._command(MAV_CMD_DO_SET_MODE, 1, mode.value, operation="set_mode")
-        self._commanded_mode = _Commanded(mode, self.clock.now_s())
+        number = await self._command(MAV_CMD_DO_SET_MODE, 1, mode.value, operation="set_mode")
+        self._commanded_mode = self._commanded(mode, MAV_CMD_DO_SET_MODE, number)
+
+    def _commanded(self, value: Any, command: int, number: int | None) -> _Commanded:
+        return _Commanded(value, self.clock.now_s(), ack=None if number is None else (command, number))
+
+    def _heartbeats_after_ack(self, commanded: _Commanded) -> int | None:
+        """HEARTBEATs read after `commanded`'s COMMAND_ACK on the message stream (0 before it is read there), or
+        None where the stream has shown no COMMAND_ACK (a vehicle or a link that leaves it out)."""
+        if commanded.ack is None or not self._acks_streamed:
+            return None
+        command, number = commanded.ack
+        streamed = self._acks_streamed.get(command, [])
+        return self._heartbeats_read - streamed[number - 1] if len(streamed) >= number else 0
 
     def _home_local(self) -> tuple[float, float, float]:
         home = self._messages.get("HOME_POSITION")
@@ -664,9 +695,9 @@ class MavlinkVehicle:
         followed = self.clock is self._clock and self._heartbeat_stamp_s is not None
         heard_s = self._heartbeat_stamp_s if followed else now_s
         if self._commanded_armed is not None:
-            armed = self._commanded_armed.reported(armed, heard_s)
+            armed = self._commanded_armed.reported(armed, heard_s, self._heartbeats_after_ack(self._commanded_armed))
         if self._commanded_mode is not None:
-            mode = self._commanded_mode.reported(mode, heard_s)
+            mode = self._commanded_mode.reported(mode, heard_s, self._heartbeats_after_ack(self._commanded_mode))
         relative_m = glob.get("relative_alt", 0) / 1000.0
         rangefinder_valid = bool(distance) and distance["min_distance"] <= distance["current_distance"] <= \
             distance["max_distance"]
