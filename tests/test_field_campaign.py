@@ -160,7 +160,7 @@ def test_a_field_campaign_repositions_measures_redoes_and_sits_beside_the_simula
     rows = _trials(db)
     assert [(r["scenario"], r["trial_index"], r["source"], r["runtime"], r["outcome"]) for r in rows] == [
         ("gps", 0, "field", "mavlink", "landed"), ("gps", 1, "field", "mavlink", "landed"),
-        ("ir", 0, "field", "mavlink", "landed"), ("ir", 1, "field", "mavlink", "landed")]
+        ("ir", 0, "field", "mavlink", "landed"), ("ir", 1, "field", "mavlink", "landed")], [r["message"] for r in rows]
     assert [r["landing_error_cm"] for r in rows] == [48.5, 61.0, None, 3.5]
     assert (rows[1]["offset_north_cm"], rows[1]["offset_east_cm"]) == (60.0, 11.0)
     assert rows[2]["details"]["measured"] is False
