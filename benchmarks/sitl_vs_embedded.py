@@ -113,9 +113,8 @@ def _table(results: list[tuple], *, runtime: str, labels: list[str], seeds: int,
 
         agree = ""
         if SCENARIOS[label][0] != "normal" and s[2] is not None and e[2] is not None:
-            judged += 1
-            agreed += abs(s[2] - e[2]) <= max(0.3 * e[2], 3.0)
-            agree = "yes" if abs(s[2] - e[2]) <= max(0.3 * e[2], 3.0) else "NO"
+            within = abs(s[2] - e[2]) <= max(0.3 * e[2], 3.0)
+            judged, agreed, agree = judged + 1, agreed + within, "yes" if within else "NO"
         print(f"{label:<22} {s[0]:>7}/{s[1]:<3} {_fmt(s[2], 6)} {_fmt(s[3], 6)} {_fmt(s[4], 6)}   "
               f"{e[0]:>6}/{e[1]:<3} {_fmt(e[2], 6)} {_fmt(e[3], 6)} {_fmt(e[4], 6)}   "
               f"{_fmt(ratio(s[2], e[2]), 6, 2)} {_fmt(ratio(s[3], e[3]), 6, 2)} {_fmt(ratio(s[4], e[4]), 6, 2)}  {agree:<5}  "

@@ -279,7 +279,7 @@ class MavlinkVehicle:
         self._closed = False
         self._connected = False
         self.system_id = 1
-        # An accepted arm/disarm or mode change holds until a HEARTBEAT confirms it (COMMANDED_STATE_GRACE_S).
+        # An accepted arm/disarm or mode change holds until a HEARTBEAT sent after it is read (see _Commanded).
         self._commanded_armed: _Commanded | None = None
         self._commanded_mode: _Commanded | None = None
         self._acks_returned: dict[int, int] = {}  # MAV_CMD -> COMMAND_ACKs its calls have returned
