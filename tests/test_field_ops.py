@@ -364,6 +364,81 @@ def _vehicle_at_a_frozen_wall_time(monkeypatch, *, rate: float):
     return vehicle, clock, now
 
 
+def test_a_mode_change_waiting_for_its_ack_is_no_takeover_while_a_third_mode_is():
+    """Until the vehicle acknowledges a mode change, the mode before it is still preland's: at 10x a LAND
+    whose COMMAND_ACK took longer than CONFIRM_S (25 wall ms) was read as "pilot takeover: mode GUIDED,
+    preland had set LAND". A mode that is neither is the pilot's, in flight or not; a refused change was
+    never preland's."""
+    from types import SimpleNamespace
+
+    from preland_app.errors import CommandDenied
+    from preland_app.field.takeover import GuardedVehicle, PilotTakeover
+
+    class Vehicle:
+        def __init__(self) -> None:
+            self.acked = asyncio.Event()
+            self.refuse = False
+
+        async def set_mode(self, mode: FlightMode) -> None:
+            await self.acked.wait()
+            if self.refuse:
+                raise CommandDenied(operation="set_mode", reason="MAV_RESULT 2")
+
+    def seen(mode: FlightMode, time_s: float) -> SimpleNamespace:
+        return SimpleNamespace(mode=mode, time_s=time_s)
+
+    async def fly() -> list[str]:
+        vehicle = Vehicle()
+        guarded = GuardedVehicle(vehicle)
+        vehicle.acked.set()
+        await guarded.set_mode(FlightMode.GUIDED)
+        vehicle.acked.clear()
+        landing = asyncio.ensure_future(guarded.set_mode(FlightMode.LAND))
+        await asyncio.sleep(0)  # the change is sent, its ACK not yet in
+        said = []
+        for step in range(20):  # 2 vehicle s of GUIDED, then of LAND, before the ACK
+            guarded.check(seen(FlightMode.GUIDED if step < 10 else FlightMode.LAND, 10.0 + 0.1 * step))
+        vehicle.acked.set()
+        await landing
+        guarded.check(seen(FlightMode.LAND, 12.0))
+        said.append(f"landing: {guarded.commanded_modes[-1].name}")
+        # After the ACK, the mode before it is no longer preland's.
+        guarded.check(seen(FlightMode.GUIDED, 12.1))
+        with pytest.raises(PilotTakeover, match="mode GUIDED, preland had set LAND"):
+            guarded.check(seen(FlightMode.GUIDED, 12.1 + GuardedVehicle.CONFIRM_S))
+
+        # In flight, a third mode is the pilot's.
+        vehicle, guarded = Vehicle(), None
+        guarded = GuardedVehicle(vehicle)
+        vehicle.acked.set()
+        await guarded.set_mode(FlightMode.GUIDED)
+        vehicle.acked.clear()
+        landing = asyncio.ensure_future(guarded.set_mode(FlightMode.LAND))
+        await asyncio.sleep(0)
+        guarded.check(seen(FlightMode.LOITER, 20.0))
+        with pytest.raises(PilotTakeover, match="mode LOITER, preland had set GUIDED"):
+            guarded.check(seen(FlightMode.LOITER, 20.0 + GuardedVehicle.CONFIRM_S))
+        vehicle.acked.set()
+        with pytest.raises(PilotTakeover):
+            await landing  # nothing more is sent once the pilot has taken over
+        said.append("third mode: taken over")
+
+        # A refused change leaves the mode before it preland's.
+        vehicle = Vehicle()
+        guarded = GuardedVehicle(vehicle)
+        vehicle.acked.set()
+        await guarded.set_mode(FlightMode.GUIDED)
+        vehicle.refuse = True
+        with pytest.raises(CommandDenied):
+            await guarded.set_mode(FlightMode.LAND)
+        for step in range(10):
+            guarded.check(seen(FlightMode.GUIDED, 30.0 + 0.1 * step))
+        said.append(f"refused: {guarded.commanded_modes}")
+        return said
+
+    assert asyncio.run(fly()) == ["landing: LAND", "third mode: taken over", "refused: [<FlightMode.GUIDED: 4>]"]
+
+
 def test_a_stall_shorter_than_two_wall_seconds_is_not_a_lost_link(monkeypatch):
     """At 40x, 5 vehicle s of heartbeat silence is 0.125 wall s: a stall of either process that long (or up to
     LINK_LOST_MIN_WALL_S) is no lost link; a silence of more than LINK_LOST_MIN_WALL_S (and 5 vehicle s) is."""

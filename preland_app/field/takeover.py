@@ -35,22 +35,31 @@ class GuardedVehicle:
         self.commanded_modes: list[FlightMode] = []
         self.taken_over: str | None = None
         self._mismatch_since_s: float | None = None
+        self._changing_to: FlightMode | None = None  # a mode change sent and not yet acknowledged
 
     @property
     def clock(self):
         return self._vehicle.clock
 
     async def set_mode(self, mode: FlightMode) -> None:
+        """The mode counts as preland's once the vehicle accepts it; until then, the one before it and this one
+        both do (the change can take longer than CONFIRM_S to acknowledge at a high speed-up)."""
         self._raise_if_taken_over("set_mode")
+        self._changing_to = mode
+        self._mismatch_since_s = None
+        try:
+            await self._vehicle.set_mode(mode)
+        finally:
+            self._changing_to = None
+        self._raise_if_taken_over("set_mode")  # the pilot took over while the change was on its way
         self.commanded_modes.append(mode)
         self._mismatch_since_s = None
-        await self._vehicle.set_mode(mode)
 
     def check(self, telemetry: Telemetry) -> None:
         """Raise PilotTakeover (once, and on every command after) when the vehicle has been in a mode
         preland did not set for CONFIRM_S vehicle seconds."""
         if self.taken_over is None and self.commanded_modes:
-            if telemetry.mode is self.commanded_modes[-1]:
+            if telemetry.mode is self.commanded_modes[-1] or telemetry.mode is self._changing_to:
                 self._mismatch_since_s = None
             elif self._mismatch_since_s is None:
                 self._mismatch_since_s = telemetry.time_s
