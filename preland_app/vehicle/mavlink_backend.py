@@ -80,6 +80,10 @@ COMMANDED_STATE_LIMIT_S = 30.0
 # machine, a garbage collection) would read as a lost link. Such a link is lost only after this much wall time
 # of quiet too (up to 2.5x the 5 vehicle s alone decide; a SITL that has stopped is still found within 2 wall s).
 LINK_LOST_MIN_WALL_S = 2.0
+# preland's own event loop has stalled (a loaded machine, a long synchronous step) when its tick has not run for
+# this long: what the vehicle sent meanwhile waits unread, so the silence seen is not yet the vehicle's.
+LOOP_STALL_WALL_S = 0.5
+_LOOP_TICK_WALL_S = 0.1
 # Ground truth for the simulated sensors: each of their readings needs a SIM_STATE of its own, and the
 # IR-LOCK reads at 50 Hz.
 SIM_STATE_HZ = 50
@@ -314,6 +318,7 @@ class MavlinkVehicle:
         self._param_values: dict[str, tuple[float, int, int]] = {}  # name -> (value, type, receipt number)
         self._param_receipts = 0
         self._tasks: list[asyncio.Task] = []
+        self._loop_ran_wall: float | None = None  # when the event loop last ran `_tick` (monotonic wall s)
         self._closed = False
         self._connected = False
         self.system_id = 1
@@ -357,6 +362,7 @@ class MavlinkVehicle:
                                                         f"{self.connect_timeout_s:g} s")
         self._direct = MavlinkDirectAsync(system)
         self._tasks.append(asyncio.ensure_future(self._listen()))
+        self._tasks.append(asyncio.ensure_future(self._tick()))
         deadline = time.monotonic() + self.connect_timeout_s
         # Paced, the simulator may hold at time 0 (sim serve --paced): its HEARTBEAT is enough.
         while not (self._clock.settled or self.paced) or "HEARTBEAT" not in self._messages:
@@ -461,6 +467,12 @@ class MavlinkVehicle:
             if "time_boot_ms" in fields:
                 self._clock.observe(fields["time_boot_ms"] / 1000.0)
 
+    async def _tick(self) -> None:
+        """Note, every _LOOP_TICK_WALL_S, that this process's event loop runs (see `_check_link`)."""
+        while True:
+            self._loop_ran_wall = time.monotonic()
+            await asyncio.sleep(_LOOP_TICK_WALL_S)
+
     def _heartbeat_confirms(self, fields: dict[str, Any]) -> None:
         """Note a HEARTBEAT that reports a commanded state, so a later one reporting another counts at once."""
         if self._commanded_mode is not None:
@@ -489,6 +501,8 @@ class MavlinkVehicle:
             if talked_s > self.link_timeout_s:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {talked_s:.1f} vehicle s")
             now_wall_s = time.monotonic()
+            if self._loop_ran_wall is not None and now_wall_s - self._loop_ran_wall > LOOP_STALL_WALL_S:
+                return  # this process stalled: the vehicle's messages of meanwhile are not read yet
             silent_vehicle_s = (now_wall_s - self._last_heartbeat_wall) * self._clock.rate
             quiet_wall_s = now_wall_s - max(self._last_heartbeat_wall, self._last_message_wall or 0.0)
             if silent_vehicle_s > self.link_timeout_s and quiet_wall_s > LINK_LOST_MIN_WALL_S:
