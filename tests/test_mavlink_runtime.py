@@ -305,38 +305,6 @@ def test_a_mavsdk_call_that_never_returns_does_not_hold_the_trial_at_its_end():
     never.set()
 
 
-def test_the_call_executor_reuses_idle_threads_and_a_blocked_call_never_holds_up_another():
-    """A paced trial sends thousands of messages: one thread started per call cost seconds of the event
-    loop's wall time. Returned calls' threads take the next calls; a blocked one keeps its thread alone."""
-    import threading
-    import time
-
-    from preland_app.vehicle.mavlink_backend import DaemonCallExecutor
-
-    executor = DaemonCallExecutor(idle_s=30.0)
-    assert [executor.submit(lambda n=n: n * n).result(timeout=10.0) for n in range(200)] == [n * n for n in range(200)]
-    assert executor.threads_started == 1
-    failing = executor.submit(lambda: 1 / 0)
-    with pytest.raises(ZeroDivisionError):
-        failing.result(timeout=10.0)
-    never = threading.Event()
-    blocked = executor.submit(never.wait)
-    assert executor.submit(lambda: "after").result(timeout=10.0) == "after"
-    assert not blocked.done() and executor.threads_started == 2 and blocked in executor.running
-    never.set()
-    assert blocked.result(timeout=10.0) is True
-    assert executor.submit(lambda: "again").result(timeout=10.0) == "again" and executor.threads_started == 2
-
-    quitting = DaemonCallExecutor(idle_s=0.05)
-    assert quitting.submit(lambda: "first").result(timeout=10.0) == "first"
-    deadline_s = time.monotonic() + 10.0  # bounded: the idle thread ends by itself after 0.05 s
-    while quitting._idle and time.monotonic() < deadline_s:
-        time.sleep(0.01)
-    assert not quitting._idle, "the idle thread did not end within 10 s"
-    assert quitting.submit(lambda: "new thread").result(timeout=10.0) == "new thread"
-    assert quitting.threads_started == 2
-
-
 def test_a_paced_flight_against_a_vehicle_that_does_not_pace_is_refused_at_connect(thesis_mission):
     from preland_app.errors import VehicleError
 

@@ -25,7 +25,6 @@ import concurrent.futures
 import contextlib
 import json
 import math
-import queue
 import threading
 import time
 from dataclasses import dataclass
@@ -160,7 +159,7 @@ def _quiet_mavsdk_logs() -> None:
 
 
 class DaemonCallExecutor(concurrent.futures.ThreadPoolExecutor):
-    """Runs each call on a daemon thread, and never waits for one at shutdown.
+    """Runs each call on a daemon thread of its own, and never waits for one at shutdown.
 
     MAVSDK's asyncio plugins run every call with `loop.run_in_executor(None, ...)`, and some calls can
     block for good: a command that got MAV_RESULT_IN_PROGRESS waits for a final COMMAND_ACK that an
@@ -168,68 +167,31 @@ class DaemonCallExecutor(concurrent.futures.ThreadPoolExecutor):
     such calls; with the loop's default ThreadPoolExecutor, `asyncio.run` would still join the blocked
     thread when the trial ends, and the trial (a campaign worker) would hang there for ever. (A
     ThreadPoolExecutor only because asyncio accepts no other kind as a loop's default; its pool is unused.)
+    The calls not yet returned are kept (`running`): MAVSDK must not be destroyed under one that is sending,
+    which crashes the process."""
 
-    A thread whose call has returned waits `idle_s` wall s for the next call before it ends: a paced trial
-    sends thousands of messages, and starting a thread for each (`Thread.start` waits for the new thread to
-    run) cost the event loop seconds of wall time. A call finds an idle thread or starts one, so a call
-    blocked for good never holds up another. The calls not yet returned are kept (`running`): MAVSDK must
-    not be destroyed under one that is sending, which crashes the process."""
-
-    def __init__(self, *, idle_s: float = 10.0) -> None:
+    def __init__(self) -> None:
         super().__init__(max_workers=1)
         self.running: set[concurrent.futures.Future] = set()
-        self.idle_s = idle_s
-        self.threads_started = 0
-        self._idle: list[queue.SimpleQueue] = []  # the inboxes of the threads waiting for a call
-        self._idle_lock = threading.Lock()
 
     def submit(self, fn, /, *args, **kwargs) -> concurrent.futures.Future:
         future: concurrent.futures.Future = concurrent.futures.Future()
         self.running.add(future)
         future.add_done_callback(self.running.discard)
-        call = (future, fn, args, kwargs)
-        with self._idle_lock:
-            inbox = self._idle.pop() if self._idle else None
-        if inbox is not None:
-            inbox.put(call)
-        else:
-            self.threads_started += 1
-            threading.Thread(target=self._work, args=(call,), name="preland-mavsdk-call", daemon=True).start()
+
+        def call() -> None:
+            if not future.set_running_or_notify_cancel():
+                return
+            try:
+                future.set_result(fn(*args, **kwargs))
+            except BaseException as error:  # handed to the awaiting coroutine
+                future.set_exception(error)
+
+        threading.Thread(target=call, name="preland-mavsdk-call", daemon=True).start()
         return future
 
-    def _work(self, call) -> None:
-        inbox: queue.SimpleQueue = queue.SimpleQueue()
-        while True:
-            future, fn, args, kwargs = call
-            del call  # hold nothing of a finished call while idle
-            if future.set_running_or_notify_cancel():
-                try:
-                    result, error = fn(*args, **kwargs), None
-                except BaseException as raised:  # handed to the awaiting coroutine
-                    result, error = None, raised
-                with self._idle_lock:  # idle before the caller hears: its next call finds this thread
-                    self._idle.append(inbox)
-                if error is None:
-                    future.set_result(result)
-                else:
-                    future.set_exception(error)
-                del result, error
-            else:
-                with self._idle_lock:
-                    self._idle.append(inbox)
-            del future, fn, args, kwargs
-            try:
-                call = inbox.get(timeout=self.idle_s)
-            except queue.Empty:
-                with self._idle_lock:
-                    if inbox in self._idle:
-                        self._idle.remove(inbox)
-                        return
-                call = inbox.get()  # a call was handed to this thread as it timed out: it is in the inbox
-
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
-        """Nothing to join: a call still blocked stays behind on its daemon thread; idle ones end by
-        themselves."""
+        """Nothing to join: a call still blocked stays behind on its daemon thread."""
 
 
 def _heartbeat_mode(fields: dict[str, Any]) -> FlightMode:
