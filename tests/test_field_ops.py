@@ -18,7 +18,7 @@ from preland_app.vehicle.types import FlightMode
 
 from .conftest import ROOT
 from .test_mavlink_runtime import PATIENCE_S, ServedSimulator
-from .waiting import until_async
+from .waiting import until, until_async
 
 
 class BlankCamera:
@@ -408,7 +408,7 @@ def test_a_mode_change_waiting_for_its_ack_is_no_takeover_while_a_third_mode_is(
             guarded.check(seen(FlightMode.GUIDED, 12.1 + GuardedVehicle.CONFIRM_S))
 
         # In flight, a third mode is the pilot's.
-        vehicle, guarded = Vehicle(), None
+        vehicle = Vehicle()
         guarded = GuardedVehicle(vehicle)
         vehicle.acked.set()
         await guarded.set_mode(FlightMode.GUIDED)
@@ -484,7 +484,12 @@ def test_a_stall_of_preland_itself_is_no_lost_link_until_it_has_read_what_came_m
             await vehicle.connect()
             await until_async(lambda: vehicle._loop_ran_wall is not None and vehicle._clock.settled,
                               timeout_s=PATIENCE_S, what="the link's clock to settle")
-            time.sleep(LINK_LOST_MIN_WALL_S + 0.5)  # the stall itself (not a wait): the loop reads nothing
+            # The stall: this thread (the event loop's) blocks, reading nothing, until by the old rule the link
+            # would be lost (more than 5 vehicle s flown and LINK_LOST_MIN_WALL_S passed since the last HEARTBEAT).
+            stalled_at_s = served.simulator.time_s
+            until(lambda: served.simulator.time_s - stalled_at_s > vehicle.link_timeout_s + 1.0
+                  and time.monotonic() - vehicle._last_heartbeat_wall > LINK_LOST_MIN_WALL_S + 0.2,
+                  timeout_s=PATIENCE_S, what="the vehicle to fly on through the stall")
             vehicle._check_link("telemetry")
             said.append("stalled: no verdict")
             await until_async(lambda: time.monotonic() - vehicle._last_heartbeat_wall < 1.0, timeout_s=PATIENCE_S,
@@ -492,14 +497,17 @@ def test_a_stall_of_preland_itself_is_no_lost_link_until_it_has_read_what_came_m
             vehicle._check_link("telemetry")
             said.append("read: linked")
             served.stop()  # the vehicle goes quiet for good
-            deadline = time.monotonic() + PATIENCE_S
-            while time.monotonic() < deadline:
+            lost: list[LinkLost] = []
+
+            def judged_lost() -> bool:
                 try:
                     vehicle._check_link("telemetry")
                 except LinkLost as error:
-                    said.append(f"quiet: {error.operation}")
-                    break
-                await asyncio.sleep(0.05)
+                    lost.append(error)
+                return bool(lost)
+
+            await until_async(judged_lost, timeout_s=PATIENCE_S, what="the quiet link to be judged lost")
+            said.append(f"quiet: {lost[0].operation}")
         finally:
             await vehicle.close()
         return said
