@@ -17,11 +17,19 @@ from preland_app.runtime.embedded import TrialRequest, run_trial
 
 ROOT = Path(__file__).resolve().parents[1]
 THESIS_MISSION = ROOT / "missions" / "thesis_square_land.yaml"
+# The thesis mission made short (5 m, 1 m legs): for tests of what surrounds
+# a flight over MAVLink (field campaigns, fault kinds), where the thesis' own altitude only adds vehicle seconds.
+SHORT_MISSION = ROOT / "tests" / "data" / "short_square_land.yaml"
 
 
 @pytest.fixture(scope="session")
 def thesis_mission() -> MissionSpec:
     return load_mission(THESIS_MISSION)
+
+
+@pytest.fixture(scope="session")
+def short_mission() -> MissionSpec:
+    return load_mission(SHORT_MISSION)
 
 
 @pytest.fixture(scope="session")

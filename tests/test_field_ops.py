@@ -16,7 +16,7 @@ from preland_app.sensing.camera import RPI_CAMERA_V2_640X480, Frame
 from preland_app.sim.spec import NavigationSpec
 from preland_app.vehicle.types import FlightMode
 
-from .conftest import ROOT
+from .conftest import SHORT_MISSION
 from .test_mavlink_runtime import PATIENCE_S, ServedSimulator
 from .waiting import until, until_async
 
@@ -163,7 +163,7 @@ def test_a_high_fence_does_not_trigger(thesis_mission):
 
 
 
-def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(thesis_mission, tmp_path):
+def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(short_mission, tmp_path):
     """fly --connect with the detection log, the video and the end-of-flight prompt, against the simulator's face."""
     from typer.testing import CliRunner
 
@@ -171,13 +171,13 @@ def test_a_field_style_flight_keeps_its_logs_and_records_the_measured_result(the
     from preland_app.cli import app
 
     mission_path = tmp_path / "mission.yaml"
-    text = (ROOT / "missions" / "thesis_square_land.yaml").read_text()
+    text = SHORT_MISSION.read_text()
     mission_path.write_text(text.replace("  mode: normal", "  mode: marker").replace(
         "pad:\n", "params:\n  PLND_ENABLED: 1\n  PLND_TYPE: 1\npad:\n").replace(
         "preset: thesis", "preset: thesis"))
     # In lock-step: the camera renders, detects and records each frame at its vehicle time, so the preflight's
     # frame-rate check (80 % of the camera's rate) holds however loaded the machine is.
-    served = ServedSimulator(thesis_mission, seed=2, paced=True)
+    served = ServedSimulator(short_mission, seed=2, paced=True)
     served.simulator.params.set("PLND_ENABLED", 1)
     served.simulator.params.set("PLND_TYPE", 1)
     db, log, video = tmp_path / "field.db", tmp_path / "detections.csv", tmp_path / "flight.mkv"

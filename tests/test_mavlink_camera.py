@@ -29,11 +29,11 @@ def test_camera_land_modes_over_mavlink(thesis_mission, mode, faults):
         assert outcome.details["attempts"] == 2 and outcome.details["marker_dropped"] > 0
 
 
-def test_the_same_seed_flies_the_same_trial_in_lock_step(thesis_mission):
+def test_the_same_seed_flies_the_same_trial_in_lock_step(short_mission):
     # Two paced flights of one seed, each against a fresh paced face: the same landing to the bit, whatever
     # the machine did meanwhile (the camera's wall time no longer decides what the autopilot is told).
-    first, _ = fly_paced(thesis_mission, seed=11, land_mode="marker")
-    second, _ = fly_paced(thesis_mission, seed=11, land_mode="marker")
+    first, _ = fly_paced(short_mission, seed=11, land_mode="marker")
+    second, _ = fly_paced(short_mission, seed=11, land_mode="marker")
     assert first.outcome is second.outcome is Outcome.LANDED, (first.message, second.message)
     assert first.landing_error_cm == second.landing_error_cm and first.landing_time_s == second.landing_time_s
     assert first.details["landing_targets_sent"] == second.details["landing_targets_sent"]
@@ -52,17 +52,17 @@ def test_paper_algorithms_over_mavlink(mode):
     assert outcome.landing_error_cm < 20.0 and not outcome.details["aborted_to_gps"]
 
 
-def test_fault_commands_reach_the_flying_companion(thesis_mission):
+def test_fault_commands_reach_the_flying_companion(short_mission):
     """PRELAND_FAULT_INJECTION sent with `preland fault send` changes the marker's faults mid-landing."""
     from typer.testing import CliRunner
 
     from preland_app.cli import app
 
-    served = ServedSimulator(thesis_mission, seed=6, paced=True)
+    served = ServedSimulator(short_mission, seed=6, paced=True)
     fault_port = free_port()
 
     async def main():
-        trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=thesis_mission, seed=6, land_mode="marker"),
+        trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=short_mission, seed=6, land_mode="marker"),
                                                   url=served.url, fault_listen=f"udp://127.0.0.1:{fault_port}",
                                                   paced=True))
         # Once the autopilot has the target (a few readings in): the command then lands mid-descent.
