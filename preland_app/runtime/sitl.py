@@ -455,6 +455,9 @@ class SitlInstance:
         if process is not None and process.poll() is None:
             try:
                 os.killpg(process.pid, signal.SIGTERM)
+                # A stopped SITL (SIGSTOP, a debugger) takes its SIGTERM only once continued, as `kill` and
+                # systemd continue one: else the grace would pass with nothing to wait for.
+                os.killpg(process.pid, signal.SIGCONT)
                 process.wait(timeout=STOP_GRACE_S)
             except (ProcessLookupError, subprocess.TimeoutExpired):
                 try:
