@@ -387,7 +387,8 @@ def test_a_mode_change_waiting_for_its_ack_is_no_takeover_while_a_third_mode_is(
     def seen(mode: FlightMode, time_s: float) -> SimpleNamespace:
         return SimpleNamespace(mode=mode, time_s=time_s)
 
-    async def fly() -> list[str]:
+    async def landing_unacknowledged():
+        """GUIDED acknowledged, then LAND sent with its ACK not yet in: (vehicle, guarded, the LAND call)."""
         vehicle = Vehicle()
         guarded = GuardedVehicle(vehicle)
         vehicle.acked.set()
@@ -395,6 +396,10 @@ def test_a_mode_change_waiting_for_its_ack_is_no_takeover_while_a_third_mode_is(
         vehicle.acked.clear()
         landing = asyncio.ensure_future(guarded.set_mode(FlightMode.LAND))
         await asyncio.sleep(0)  # the change is sent, its ACK not yet in
+        return vehicle, guarded, landing
+
+    async def fly() -> list[str]:
+        vehicle, guarded, landing = await landing_unacknowledged()
         said = []
         for step in range(20):  # 2 vehicle s of GUIDED, then of LAND, before the ACK
             guarded.check(seen(FlightMode.GUIDED if step < 10 else FlightMode.LAND, 10.0 + 0.1 * step))
@@ -408,13 +413,7 @@ def test_a_mode_change_waiting_for_its_ack_is_no_takeover_while_a_third_mode_is(
             guarded.check(seen(FlightMode.GUIDED, 12.1 + GuardedVehicle.CONFIRM_S))
 
         # In flight, a third mode is the pilot's.
-        vehicle = Vehicle()
-        guarded = GuardedVehicle(vehicle)
-        vehicle.acked.set()
-        await guarded.set_mode(FlightMode.GUIDED)
-        vehicle.acked.clear()
-        landing = asyncio.ensure_future(guarded.set_mode(FlightMode.LAND))
-        await asyncio.sleep(0)
+        vehicle, guarded, landing = await landing_unacknowledged()
         guarded.check(seen(FlightMode.LOITER, 20.0))
         with pytest.raises(PilotTakeover, match="mode LOITER, preland had set GUIDED"):
             guarded.check(seen(FlightMode.LOITER, 20.0 + GuardedVehicle.CONFIRM_S))
