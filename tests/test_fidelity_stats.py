@@ -93,3 +93,23 @@ def test_the_section_rejects_the_scenario_that_differs_after_holms_correction():
     assert both.count("1 of 2 scenarios consistent with the field; rejected: shifted.") == 2
     assert "### Tests per scenario: ArduPilot SITL" in both and both.index("ArduPilot SITL") > both.index("| same |")
     assert [t.scenario for t in scenario_tests([same, *witness], source="sitl")] == ["same", "shifted"]
+
+
+def test_rejected_landing_times_on_both_sides_of_the_field_are_named_each_side():
+    rng = np.random.default_rng(3)
+    errors = lambda: (list(rng.normal(5, 1, 30)), list(rng.normal(5, 1, 10)))  # noqa: E731
+    slower_field = _summary("slower field", *errors(), sim_times=list(rng.normal(20, 1, 30)),
+                            field_times=list(rng.normal(30, 1, 10)))
+    faster_field = _summary("faster field", *errors(), sim_times=list(rng.normal(20, 1, 30)),
+                            field_times=list(rng.normal(12, 1, 10)))
+    same = _summary("same", *errors())
+    tests = {t.scenario: t for t in scenario_tests([slower_field, faster_field, same])}
+    assert tests["slower field"].sim_time_median_s < tests["slower field"].field_time_median_s
+    assert [tests[k].time_verdict for k in ("slower field", "faster field", "same")] == [
+        "rejected", "rejected", "consistent"]
+    text = verdicts_section([slower_field, faster_field, same])
+    assert ("Landing times: rejected in 2 scenarios, shorter than the field's in 1 (slower field) and longer in 1 "
+            "(faster field).") in text
+    # All on one side: a descent speed could bring them in, and the section says nothing more.
+    assert "Landing times:" not in verdicts_section([slower_field, same])
+
