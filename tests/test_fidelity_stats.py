@@ -36,6 +36,12 @@ def test_a_perfect_models_floor_is_what_sampling_alone_gives():
     median, p95 = area_floor(sim, 10, np.random.default_rng(3), draws=500)
     # A sample of 10 from a normal of sd 2: its ECDF lies about 0.5 cm (in area) from the parent's.
     assert 0.3 < median < 1.0 < p95 < 2.0
+    # All draws at once give what area_metric gives draw by draw, on the same draws (ties included).
+    tied = np.round(sim[:60], 0)
+    rng = np.random.default_rng(4)
+    one_by_one = [area_metric(tied, rng.choice(tied, size=7, replace=True)).total for _ in range(300)]
+    assert area_floor(tied, 7, np.random.default_rng(4), draws=300) == pytest.approx(
+        (np.median(one_by_one), np.percentile(one_by_one, 95)), rel=1e-12)
 
 
 def test_mann_whitney_and_clopper_pearson_match_their_closed_forms():
@@ -57,6 +63,16 @@ def test_spearman_and_its_ceiling():
     median, low = spearman_ceiling(close, np.random.default_rng(0), draws=500)
     assert low < median <= 1.0 and low < 0.5  # overlapping scenarios: resampled ranks often swap
     assert all(math.isnan(v) for v in spearman_ceiling([[5.0], [5.0], [5.0]], np.random.default_rng(0), draws=5))
+    # All draws at once give what spearman gives draw by draw, on the same draws; a draw whose means tie
+    # throughout has no ranking and is left out, as spearman's NaN is.
+    groups = [[1.0, 5.0, 9.0], [2.0, 6.0, 10.0], [2.0, 6.0, 10.0], [4.0, 4.0, 4.0]]
+    rng = np.random.default_rng(6)
+    observed = [float(np.mean(g)) for g in groups]
+    rhos = [spearman([float(rng.choice(np.asarray(g), size=3, replace=True).mean()) for g in groups], observed)
+            for _ in range(400)]
+    rhos = [r for r in rhos if not math.isnan(r)]
+    assert spearman_ceiling(groups, np.random.default_rng(6), draws=400) == pytest.approx(
+        (np.median(rhos), np.percentile(rhos, 5)), rel=1e-12)
 
 
 def _summary(label: str, sim_cm, field_cm, *, sim_times=None, field_times=None) -> ScenarioSummary:

@@ -85,8 +85,24 @@ def area_floor(simulated: Sequence[float], n_field: int, rng: np.random.Generato
                draws: int = FLOOR_DRAWS) -> tuple[float, float]:
     """(median, 95th percentile) of the area a perfect model scores against `n_field` field values."""
     sim = np.asarray(simulated, float)
-    areas = [area_metric(sim, rng.choice(sim, size=n_field, replace=True)).total for _ in range(draws)]
+    resampled = np.array([rng.choice(sim, size=n_field, replace=True) for _ in range(draws)])
+    areas = _areas_against_resamples(sim, resampled)
     return float(np.median(areas)), float(np.percentile(areas, 95))
+
+
+def _areas_against_resamples(sim: np.ndarray, resampled: np.ndarray) -> np.ndarray:
+    """`area_metric(sim, row).total` for each row of `resampled` (values drawn from `sim`), all at once: the
+    rows' values are among `sim`'s, so every ECDF steps at `sim`'s distinct values."""
+    points = np.unique(sim)
+    if len(points) < 2:
+        return np.zeros(len(resampled))
+    widths = np.diff(points)
+    rows, n = resampled.shape
+    at = np.searchsorted(points, resampled)  # each value's step
+    counts = np.bincount((np.arange(rows)[:, None] * len(points) + at).ravel(), minlength=rows * len(points))
+    ecdf_rows = np.cumsum(counts.reshape(rows, len(points)), axis=1)[:, :-1] / n
+    gap = ecdf_rows - _ecdf(sim, points[:-1])
+    return np.sum(np.clip(gap, 0, None) * widths, axis=1) + np.sum(np.clip(-gap, 0, None) * widths, axis=1)
 
 
 def spearman(a: Sequence[float], b: Sequence[float]) -> float:
@@ -102,13 +118,23 @@ def spearman_ceiling(field_groups: Sequence[Sequence[float]], rng: np.random.Gen
                      draws: int = CEILING_DRAWS) -> tuple[float, float]:
     """(median, 5th percentile) of Spearman's rho between resampled and observed field means: the most a
     simulator can reach against these field trials, however right it is."""
+    from scipy.stats import rankdata
+
     groups = [np.asarray(g, float) for g in field_groups]
-    observed = [float(g.mean()) for g in groups]
-    rhos = [spearman([float(rng.choice(g, size=len(g), replace=True).mean()) for g in groups], observed)
-            for _ in range(draws)]
-    rhos = [r for r in rhos if not math.isnan(r)]
-    if not rhos:  # the field means tie whatever is resampled: no ranking to reach
+    observed = np.array([float(g.mean()) for g in groups])
+    means = np.array([[float(rng.choice(g, size=len(g), replace=True).mean()) for g in groups]
+                      for _ in range(draws)])
+    if len(set(observed)) < 2:
         return math.nan, math.nan
+    varying = np.array([len(set(row)) >= 2 for row in means])  # a constant row has no ranking (NaN)
+    if not varying.any():  # the field means tie whatever is resampled: no ranking to reach
+        return math.nan, math.nan
+    # Spearman's rho is Pearson's r of the average ranks, row by row.
+    ranks = rankdata(means[varying], axis=1)
+    ranked = rankdata(observed)
+    ranks -= ranks.mean(axis=1, keepdims=True)
+    ranked -= ranked.mean()
+    rhos = ranks @ ranked / np.sqrt(np.sum(ranks ** 2, axis=1) * np.sum(ranked ** 2))
     return float(np.median(rhos)), float(np.percentile(rhos, 5))
 
 
