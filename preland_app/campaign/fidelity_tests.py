@@ -200,7 +200,8 @@ def scenario_tests(summaries, *, source: str = "sim") -> list[ScenarioTest]:
                                   area=area_metric(s.errors_cm(), field), floor_median=floor[0], floor_p95=floor[1],
                                   time_p=times[s.scenario], time_holm_p=time_adjusted.get(s.scenario),
                                   sim_time_median_s=medians[s.scenario][0],
-                                  field_time_median_s=medians[s.scenario][1], sim_landed=len(s.landed), sim_trials=len(s.trials)))
+                                  field_time_median_s=medians[s.scenario][1], sim_landed=len(s.landed),
+                                  sim_trials=len(s.trials)))
     return tests
 
 
