@@ -18,7 +18,7 @@ from preland_app.runtime.embedded import TrialRequest, run_trial
 ROOT = Path(__file__).resolve().parents[1]
 THESIS_MISSION = ROOT / "missions" / "thesis_square_land.yaml"
 # The thesis mission made short (5 m, 1 m legs): for tests of what surrounds a flight over MAVLink (field
-# campaigns, a fault command mid-landing), where the thesis' own altitude only adds vehicle seconds.
+# campaigns, fault kinds and commands, camera land modes), where the thesis' own altitude only adds vehicle seconds.
 SHORT_MISSION = ROOT / "tests" / "data" / "short_square_land.yaml"
 
 

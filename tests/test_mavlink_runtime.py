@@ -10,6 +10,7 @@ from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest
 from preland_app.runtime.mavlink import fly_mavlink
 from preland_app.sim.mavlink_face import MavlinkFace
+from preland_app.sim.params import ARDUCOPTER_PARAMS
 from preland_app.sim.simulator import Simulator
 from preland_app.vehicle.types import FlightMode
 
@@ -112,7 +113,7 @@ def test_thesis_mission_over_mavlink(thesis_mission, short_mission, mode, paced,
     else:
         assert 5.0 < outcome.landing_error_cm < 300.0
     # From 0.75 to 2 times the descent at LAND_SPEED (50 cm/s): 15 to 40 s from the thesis mission's 10 m.
-    nominal_s = mission.takeoff.altitude_rel_m / 0.5
+    nominal_s = mission.takeoff.altitude_rel_m / (ARDUCOPTER_PARAMS["LAND_SPEED"].default / 100.0)
     assert 0.75 * nominal_s < outcome.landing_time_s < 2.0 * nominal_s
 
 

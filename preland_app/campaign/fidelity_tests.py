@@ -77,8 +77,13 @@ def area_metric(simulated: Sequence[float], field: Sequence[float]) -> Area:
         return Area(0.0, 0.0, 0.0)
     widths = np.diff(points)
     gap = _ecdf(obs, points[:-1]) - _ecdf(sim, points[:-1])  # > 0: the simulated CDF lags, its errors larger
-    over, under = float(np.sum(np.clip(gap, 0, None) * widths)), float(np.sum(np.clip(-gap, 0, None) * widths))
+    over, under = (float(side) for side in _over_under(gap, widths))
     return Area(over + under, over, under)
+
+
+def _over_under(gap: np.ndarray, widths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The areas where `gap` (field ECDF minus simulated, over the last axis) is positive and negative."""
+    return np.sum(np.clip(gap, 0, None) * widths, axis=-1), np.sum(np.clip(-gap, 0, None) * widths, axis=-1)
 
 
 def area_floor(simulated: Sequence[float], n_field: int, rng: np.random.Generator,
@@ -101,8 +106,8 @@ def _areas_against_resamples(sim: np.ndarray, resampled: np.ndarray) -> np.ndarr
     at = np.searchsorted(points, resampled)  # each value's step
     counts = np.bincount((np.arange(rows)[:, None] * len(points) + at).ravel(), minlength=rows * len(points))
     ecdf_rows = np.cumsum(counts.reshape(rows, len(points)), axis=1)[:, :-1] / n
-    gap = ecdf_rows - _ecdf(sim, points[:-1])
-    return np.sum(np.clip(gap, 0, None) * widths, axis=1) + np.sum(np.clip(-gap, 0, None) * widths, axis=1)
+    over, under = _over_under(ecdf_rows - _ecdf(sim, points[:-1]), widths)
+    return over + under
 
 
 def spearman(a: Sequence[float], b: Sequence[float]) -> float:
@@ -126,7 +131,7 @@ def spearman_ceiling(field_groups: Sequence[Sequence[float]], rng: np.random.Gen
                       for _ in range(draws)])
     if len(set(observed)) < 2:
         return math.nan, math.nan
-    varying = np.array([len(set(row)) >= 2 for row in means])  # a constant row has no ranking (NaN)
+    varying = np.ptp(means, axis=1) > 0  # a constant row has no ranking (spearman's NaN)
     if not varying.any():  # the field means tie whatever is resampled: no ranking to reach
         return math.nan, math.nan
     # Spearman's rho is Pearson's r of the average ranks, row by row.
