@@ -452,7 +452,8 @@ class MavlinkVehicle:
             # time; a vehicle that stops answering at all is the clock's to find (a wall bound).
             silent_vehicle_s = locked.now_s() - self._last_heartbeat_vehicle_s
             if silent_vehicle_s > self.link_timeout_s:
-                raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
+                raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s in "
+                                                          "lock-step")
         elif self._last_heartbeat_wall is not None:
             # A vehicle that still sends its stamped messages counts the silence itself: vehicle seconds by
             # its own stamps, whatever the wall time. One that sends nothing is judged by wall time, and only
@@ -461,14 +462,17 @@ class MavlinkVehicle:
             talked_s = 0.0 if newest_s is None or self._heartbeat_stamp_s is None else \
                 newest_s - self._heartbeat_stamp_s
             if talked_s > self.link_timeout_s:
-                raise LinkLost(operation=operation, reason=f"no heartbeat for {talked_s:.1f} vehicle s")
+                raise LinkLost(operation=operation, reason=f"no heartbeat for {talked_s:.1f} vehicle s by the "
+                                                          "stamps of its other messages")
             now_wall_s = time.monotonic()
             if self._loop_ran_wall is not None and now_wall_s - self._loop_ran_wall > LOOP_STALL_WALL_S:
                 return  # this process stalled: the vehicle's messages of meanwhile are not read yet
             silent_vehicle_s = (now_wall_s - self._last_heartbeat_wall) * self._clock.rate
             quiet_wall_s = now_wall_s - max(self._last_heartbeat_wall, self._last_message_wall or 0.0)
             if silent_vehicle_s > self.link_timeout_s and quiet_wall_s > LINK_LOST_MIN_WALL_S:
-                raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s")
+                raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s at "
+                                                          f"{self._clock.rate:.2g}x, nothing heard for "
+                                                          f"{quiet_wall_s:.1f} wall s")
 
     async def close(self) -> None:
         if self._paced_clock is not None and self._paced_clock.started and self._direct is not None:
