@@ -21,6 +21,24 @@ import threading
 import time
 from pathlib import Path
 
+
+def _arguments() -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--model")
+    parser.add_argument("--speedup", type=float, default=1.0)
+    parser.add_argument("--defaults", default="")
+    parser.add_argument("-I", dest="instance", type=int, default=0)
+    parser.add_argument("--home")
+    parser.add_argument("--serial0")
+    parser.add_argument("--sim-port-out", type=int, default=None)
+    return parser.parse_args()
+
+
+if __name__ == "__main__":
+    # Read before the simulator is imported: preland asks every binary for its --help before it launches it,
+    # and arducopter answers at once.
+    ARGUMENTS = _arguments()
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from preland_app.clock_scaled import ScaledWallClock  # noqa: E402
@@ -108,16 +126,7 @@ class SitlFace(MavlinkFace):
             super()._on_param_set(message)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--model")
-    parser.add_argument("--speedup", type=float, default=1.0)
-    parser.add_argument("--defaults", default="")
-    parser.add_argument("-I", dest="instance", type=int, default=0)
-    parser.add_argument("--home")
-    parser.add_argument("--serial0")
-    parser.add_argument("--sim-port-out", type=int, default=None)
-    args = parser.parse_args()
+def main(args: argparse.Namespace) -> None:
     log_dir = os.environ.get("FAKE_SITL_LOG_DIR")
     if log_dir:
         _write_whole(Path(log_dir, f"{os.getpid()}.json"), json.dumps({"pid": os.getpid(), "argv": sys.argv[1:]}))
@@ -141,11 +150,14 @@ def main() -> None:
     if log_dir:
         # Tests that stop SITL in flight wait for this file instead of guessing a wall time.
         step, airborne = simulator.step, Path(log_dir, f"{os.getpid()}.airborne")
+        noted = False
 
         def step_and_note() -> None:
+            nonlocal noted
             step()
-            if not airborne.exists() and simulator.autopilot.landed_state().name == "IN_AIR":
+            if not noted and simulator.autopilot.landed_state().name == "IN_AIR":
                 _write_whole(airborne, f"{simulator.time_s:.2f}\n")
+                noted = True
 
         simulator.step = step_and_note
     if args.model and args.model.startswith("JSON"):
@@ -159,4 +171,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(ARGUMENTS)
