@@ -35,9 +35,9 @@ def _module(path: Path):
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Path:
     """The site, built once for the module as `make docs` builds it (strict), as a preview: the report's
-    figures from 2 trials a scenario (what they show is tested in test_docs_figures.py)."""
+    figures from 1 trial a scenario (what they show is tested in test_docs_figures.py)."""
     out = tmp_path_factory.mktemp("site")
-    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1", "DISABLE_MKDOCS_2_WARNING": "true", "PRELAND_DOCS_TRIALS": "2"}
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1", "DISABLE_MKDOCS_2_WARNING": "true", "PRELAND_DOCS_TRIALS": "1"}
     result = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
                             cwd=ROOT, capture_output=True, text=True, timeout=900, env=env)
     assert result.returncode == 0, result.stderr[-4000:]
