@@ -125,6 +125,18 @@ def _wait_stored(db: Path, count: int, process: subprocess.Popen, timeout_s: flo
                          f"{f'within {timeout_s:g} s' if running else 'before the driver ended'}: {said}")
 
 
+def _finished(db: Path, process: subprocess.Popen, timeout_s: float = 600.0) -> str:
+    """Wait until the driver `process` ends; its stderr. The bound, as `_wait_stored`'s, is for a driver that
+    hangs: one that has not ended within it is stopped, and the failure says how many trials `db` holds."""
+    try:
+        return process.communicate(timeout=timeout_s)[1].decode(errors="replace")
+    except subprocess.TimeoutExpired:
+        process.terminate()
+        said = process.communicate(timeout=60)[1].decode(errors="replace")[-2000:]
+        raise AssertionError(f"the driver did not end within {timeout_s:g} s ({_stored(db)} trials stored): "
+                             f"{said}") from None
+
+
 def _driver(args: list[str], **kwargs) -> subprocess.Popen:
     env = {key: value for key, value in os.environ.items() if key != "RAY_ADDRESS"}
     return subprocess.Popen([sys.executable, "-m", "preland_app.cli", "campaign", "run", *args, "--quiet"],
@@ -227,7 +239,7 @@ def test_two_ray_drivers_at_once_one_is_refused_and_every_trial_is_stored_once(c
     assert second.exit_code == 1 and "Traceback" not in second.output, second.output
     assert len(second.stderr.strip().splitlines()) == 1
     assert f"being run by another driver (pid {first.pid} on host" in second.stderr and "ray executor" in second.stderr
-    _, stderr = first.communicate(timeout=120)
+    stderr = _finished(db, first)
     assert first.returncode == 0, stderr
     with ResultsStore(db) as store:
         keys = [(t["scenario"], t["trial_index"]) for t in store.trials("quick")]
@@ -253,7 +265,7 @@ def test_ctrl_c_stops_a_ray_campaign_with_130_and_a_resumed_one_ends_leaving_no_
     resumed = _driver([*args, "--resume"])
     _wait_stored(db, 9, resumed)
     started = _ray_processes(resumed.pid)
-    _, stderr = resumed.communicate(timeout=90)
+    stderr = _finished(db, resumed)
     assert resumed.returncode == 0, stderr
     assert started and _wait_gone(started) == []
     with ResultsStore(db) as store:
