@@ -531,3 +531,49 @@ def test_a_vehicle_that_talks_without_heartbeats_has_lost_its_link_by_its_own_st
     clock.newest_s = 105.2
     with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 5.2 vehicle s by the stamps of its other messages"):
         vehicle._check_link("telemetry")
+
+
+class _CountedSdk:
+    """What close() needs of MAVSDK's instance: a synchronous destroy, counted."""
+
+    def __init__(self) -> None:
+        self.destroyed = 0
+
+    def destroy(self) -> None:
+        self.destroyed += 1
+
+
+def test_closing_destroys_mavsdk_even_when_it_fails_or_is_cancelled():
+    """MAVSDK is destroyed by close() itself, never left to the garbage collector: when closing works, when a
+    step of it fails, and when it is cancelled while a task will not end."""
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
+
+    async def close_with(trouble: str) -> _CountedSdk:
+        vehicle = MavlinkVehicle(url="udp://:14550")
+        sdk = vehicle._sdk = _CountedSdk()
+        if trouble == "a failing log":
+            class _Log:
+                def close(self):
+                    raise OSError("disk full")
+
+            vehicle.tlog = _Log()
+            with pytest.raises(OSError, match="disk full"):
+                await vehicle.close()
+        elif trouble == "a task that will not end":
+            async def stubborn() -> None:
+                try:
+                    await asyncio.Event().wait()
+                except asyncio.CancelledError:
+                    await asyncio.Event().wait()  # ignores the cancel: close() waits here until cancelled
+
+            vehicle._tasks.append(asyncio.ensure_future(stubborn()))
+            await asyncio.sleep(0)
+            with pytest.raises(TimeoutError):
+                await asyncio.wait_for(vehicle.close(), timeout=0.2)
+        else:
+            await vehicle.close()
+        assert vehicle._sdk is None and not vehicle.connected
+        return sdk
+
+    for trouble in ("nothing", "a failing log", "a task that will not end"):
+        assert asyncio.run(close_with(trouble)).destroyed == 1, trouble

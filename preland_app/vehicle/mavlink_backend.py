@@ -475,30 +475,46 @@ class MavlinkVehicle:
                                                           f"{quiet_wall_s:.1f} wall s")
 
     async def close(self) -> None:
-        if self._paced_clock is not None and self._paced_clock.started and self._direct is not None:
-            self._paced_clock.release()
-            try:  # the simulator runs free again at once (else after its own wall bound)
-                await asyncio.wait_for(self._send_now("PRELAND_PACE", {"time_boot_ms": 0}), timeout=2.0)
-            except Exception:  # closing must not fail a trial
-                pass
-        self._closed = True
-        for task in self._tasks:
-            task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
-        if self.tlog is not None:
-            self.tlog.close()
-        if self._executor is not None:
-            # Calls still on their threads (a send the cancelled tasks left) finish before MAVSDK is destroyed;
-            # one blocked for good (a command whose final ACK never comes) is left after the bound.
-            deadline = time.monotonic() + CLOSE_CALLS_WALL_S
-            while self._executor.running and time.monotonic() < deadline:
-                await asyncio.sleep(0.005)
-        if self._sdk is not None:
-            try:
-                await self._sdk.destroy()
-            except Exception:  # closing must not fail a trial
-                pass
-            self._sdk = None
+        calls_waited = False
+        try:
+            if self._paced_clock is not None and self._paced_clock.started and self._direct is not None:
+                self._paced_clock.release()
+                try:  # the simulator runs free again at once (else after its own wall bound)
+                    await asyncio.wait_for(self._send_now("PRELAND_PACE", {"time_boot_ms": 0}), timeout=2.0)
+                except Exception:  # closing must not fail a trial
+                    pass
+            self._closed = True
+            for task in self._tasks:
+                task.cancel()
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+            if self.tlog is not None:
+                self.tlog.close()
+            if self._executor is not None:
+                # Calls still on their threads (a send the cancelled tasks left) finish before MAVSDK is
+                # destroyed; one blocked for good (a command whose final ACK never comes) is left after the bound.
+                deadline = time.monotonic() + CLOSE_CALLS_WALL_S
+                while self._executor.running and time.monotonic() < deadline:
+                    await asyncio.sleep(0.005)
+            calls_waited = True
+        finally:
+            self._closed = True
+            self._destroy_sdk(calls_waited=calls_waited)
+
+    def _destroy_sdk(self, *, calls_waited: bool) -> None:
+        """Destroy MAVSDK now, also when closing was cancelled or failed: an instance left to the garbage
+        collector is destroyed whenever a collection runs, in whatever then runs, and perhaps under a call
+        still sending, which aborts the process."""
+        sdk, self._sdk = self._sdk, None
+        if sdk is None:
+            return
+        if not calls_waited and self._executor is not None and self._executor.running:
+            # Cancelled or failed before the calls on threads were waited for: the same bound, here (MAVSDK must
+            # not be destroyed under a call that is sending).
+            concurrent.futures.wait(list(self._executor.running), timeout=CLOSE_CALLS_WALL_S)
+        try:
+            sdk.destroy()  # synchronous in MAVSDK-Python 4
+        except Exception:  # closing must not fail a trial
+            pass
 
     # ---------------------------------------------------------------- sending
 
