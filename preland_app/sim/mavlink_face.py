@@ -76,9 +76,6 @@ PACED_STEPS_PER_YIELD = 20
 _PACE_TYPE = f"UNKNOWN_{message_id('PRELAND_PACE')}"  # pymavlink's compiled dialect does not know it
 # Vehicle seconds the face may fall behind its clock and still make them up by stepping without sleeping.
 MAX_BEHIND_S = 0.5
-# Running free, the face steps this many vehicle seconds at a time between two meetings with the event loop
-# (a sleep until the clock reaches the batch, or a yield when behind): ArduPilot's 400 Hz loop is 2.5 ms.
-FREE_BATCH_S = 0.01
 _STREAMS_DEFAULT_HZ = {mavlink2.MAVLINK_MSG_ID_HEARTBEAT: 1.0}
 # REQUEST_DATA_STREAM groups, as ArduPilot maps them (SRx_POSITION, SRx_EXTRA1, SRx_EXTENDED_STATUS).
 _DATA_STREAMS = {
@@ -222,7 +219,6 @@ class MavlinkFace(GroundStationServices):
         # quarter millisecond takes more than that) is made up by the next steps: sleeping dt after every
         # step ran the face at 2.25x when asked for 3x, and at 8x whatever it was asked above that.
         due_s = self.clock.now_s()
-        batch_end_s = due_s
         paced_steps = 0
         try:
             while True:
@@ -234,20 +230,16 @@ class MavlinkFace(GroundStationServices):
                         self._step_and_serve()
                     else:
                         await self._hold()
-                        due_s = batch_end_s = self.clock.now_s()  # free again later: from then, not catching up
+                        due_s = self.clock.now_s()  # free again later: from then, not catching up
                     continue
                 due_s += dt_s
-                if due_s >= batch_end_s:
-                    # A batch of steps ends: meet the event loop once (a round trip each 800 Hz step cost more
-                    # than the step), sleeping if the batch ran ahead of the clock.
-                    wait_s = due_s - self.clock.now_s()
-                    if wait_s > 0:
-                        await self.clock.sleep(wait_s)
-                    else:
-                        if wait_s < -MAX_BEHIND_S:
-                            due_s = self.clock.now_s()  # far behind (a loaded machine): slow down, don't race
-                        await asyncio.sleep(0)
-                    batch_end_s = due_s + FREE_BATCH_S
+                wait_s = due_s - self.clock.now_s()
+                if wait_s > 0:
+                    await self.clock.sleep(wait_s)
+                else:
+                    if wait_s < -MAX_BEHIND_S:
+                        due_s = self.clock.now_s()  # far behind (a loaded machine): slow down, don't race
+                    await asyncio.sleep(0)
                 self._step_and_serve()
         finally:
             self._close()
