@@ -108,9 +108,20 @@ def _stored(db: Path) -> int:
         return 0
 
 
-def _wait_stored(db: Path, count: int, process: subprocess.Popen, timeout_s: float = 600.0) -> int:
-    """Wait until `db` holds `count` trials while `process` runs. The bound is for a driver that hangs, not a
-    speed target: a Ray driver on a loaded 2-core machine takes minutes to start and run a few trials."""
+# The bound on a driver's waits is for one that hangs, not a speed target: a Ray driver on a loaded 2-core
+# machine takes minutes to start and run a few trials.
+DRIVER_HANG_S = 600.0
+
+
+def _stopped_and_said(process: subprocess.Popen) -> str:
+    """Stop `process` if it still runs; the end of what it wrote to stderr."""
+    if process.poll() is None:
+        process.terminate()
+    return process.communicate(timeout=60)[1].decode(errors="replace")[-2000:]
+
+
+def _wait_stored(db: Path, count: int, process: subprocess.Popen, timeout_s: float = DRIVER_HANG_S) -> int:
+    """Wait until `db` holds `count` trials while `process` runs."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and process.poll() is None:
         stored = _stored(db)
@@ -118,21 +129,18 @@ def _wait_stored(db: Path, count: int, process: subprocess.Popen, timeout_s: flo
             return stored
         time.sleep(0.05)
     running = process.poll() is None
-    if running:
-        process.terminate()
-    said = process.communicate(timeout=60)[1].decode(errors="replace")[-2000:]
+    said = _stopped_and_said(process)
     raise AssertionError(f"{count} trials were not stored ({_stored(db)} were) "
                          f"{f'within {timeout_s:g} s' if running else 'before the driver ended'}: {said}")
 
 
-def _finished(db: Path, process: subprocess.Popen, timeout_s: float = 600.0) -> str:
-    """Wait until the driver `process` ends; its stderr. The bound, as `_wait_stored`'s, is for a driver that
-    hangs: one that has not ended within it is stopped, and the failure says how many trials `db` holds."""
+def _finished(db: Path, process: subprocess.Popen, timeout_s: float = DRIVER_HANG_S) -> str:
+    """Wait until the driver `process` ends; its stderr. One that has not ended within the bound is stopped,
+    and the failure says how many trials `db` holds."""
     try:
         return process.communicate(timeout=timeout_s)[1].decode(errors="replace")
     except subprocess.TimeoutExpired:
-        process.terminate()
-        said = process.communicate(timeout=60)[1].decode(errors="replace")[-2000:]
+        said = _stopped_and_said(process)
         raise AssertionError(f"the driver did not end within {timeout_s:g} s ({_stored(db)} trials stored): "
                              f"{said}") from None
 
