@@ -2,6 +2,7 @@
 
 import asyncio
 import json
+import socket
 from dataclasses import replace
 
 import numpy as np
@@ -577,3 +578,35 @@ def test_closing_destroys_mavsdk_even_when_it_fails_or_is_cancelled():
 
     for trouble in ("nothing", "a failing log", "a task that will not end"):
         assert asyncio.run(close_with(trouble)).destroyed == 1, trouble
+
+
+def test_a_connect_that_fails_destroys_mavsdk_itself(monkeypatch):
+    """No autopilot answers: connect() raises LinkLost naming the wait, and the MAVSDK instance it made is
+    already destroyed (a real MAVSDK: its own register of live instances no longer holds it), so nothing is
+    left for the garbage collector to destroy in whatever thread it runs."""
+    import mavsdk.asyncio.mavsdk as mavsdk_asyncio
+    from mavsdk import mavsdk as mavsdk_core
+
+    from preland_app.errors import LinkLost
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
+
+    made = []
+
+    class Recorded(mavsdk_asyncio.Mavsdk):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(mavsdk_asyncio, "Mavsdk", Recorded)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:  # bound, never answers
+        silent.bind(("127.0.0.1", 0))
+        vehicle = MavlinkVehicle(url=f"udpout://127.0.0.1:{silent.getsockname()[1]}", connect_timeout_s=0.5)
+
+        async def connect() -> None:
+            with pytest.raises(LinkLost, match="no autopilot on .* within 0.5 s"):
+                await vehicle.connect()
+
+        asyncio.run(connect())
+    (sdk,) = made
+    assert vehicle._sdk is None and not vehicle.connected
+    assert sdk._mavsdk._handle is None and sdk._mavsdk not in mavsdk_core._live_instances

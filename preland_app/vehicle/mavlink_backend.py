@@ -315,6 +315,15 @@ class MavlinkVehicle:
         asyncio.get_running_loop().set_default_executor(self._executor)
         self._sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER))
         try:
+            await self._link_up(MavlinkDirectAsync)
+        except BaseException:
+            # Nothing is left to the garbage collector: it destroys MAVSDK in whatever thread collects, which
+            # can abort the process (a caller that closes after a failed connect finds it closed).
+            await self.close()
+            raise
+
+    async def _link_up(self, direct_plugin) -> None:
+        try:
             await self._sdk.add_any_connection(mavsdk_connection_url(self.url))
         except Exception as error:
             raise VehicleError(operation="connect", reason=f"{self.url}: {error}") from None
@@ -322,7 +331,7 @@ class MavlinkVehicle:
         if system is None:
             raise LinkLost(operation="connect", reason=f"no autopilot on {self.url} within "
                                                         f"{self.connect_timeout_s:g} s")
-        self._direct = MavlinkDirectAsync(system)
+        self._direct = direct_plugin(system)
         self._tasks.append(asyncio.ensure_future(self._listen()))
         self._tasks.append(asyncio.ensure_future(self._tick()))
         deadline = time.monotonic() + self.connect_timeout_s
@@ -477,7 +486,7 @@ class MavlinkVehicle:
     async def close(self) -> None:
         calls_waited = False
         try:
-            if self._paced_clock is not None and self._paced_clock.started and self._direct is not None:
+            if self._paced_clock is not None and self._paced_clock.started and self._sdk is not None:
                 self._paced_clock.release()
                 try:  # the simulator runs free again at once (else after its own wall bound)
                     await asyncio.wait_for(self._send_now("PRELAND_PACE", {"time_boot_ms": 0}), timeout=2.0)
