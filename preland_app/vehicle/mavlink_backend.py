@@ -557,8 +557,11 @@ class MavlinkVehicle:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         payload = {"target_system": self.system_id, "target_component": 1, **fields} if targeted else dict(fields)
-        await self._direct.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
-                                                       target_component_id=1, fields_json=json.dumps(payload)))
+        # Sent from this thread: sending queues the message and returns (no answer is awaited), where the
+        # asyncio plugin would start a thread for each (a LANDING_TARGET and a PRELAND_PACE grant every few
+        # vehicle ms). The call releases the GIL, as every ctypes call into MAVSDK does.
+        self._direct._plugin.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
+                                                         target_component_id=1, fields_json=json.dumps(payload)))
 
     async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
         """Send COMMAND_LONG and await its COMMAND_ACK: which ACK of `command` it was on this link (1, 2, ...),
