@@ -275,6 +275,7 @@ class MavlinkVehicle:
         self._last_message_wall: float | None = None  # any message of the vehicle's
         self._sdk = None
         self._direct = None
+        self._sender = None  # the synchronous MavlinkDirect under `_direct`
         self._executor: DaemonCallExecutor | None = None
         self._param_types: dict[str, int] = {}  # name -> MAV_PARAM_TYPE, as the autopilot declares it
         self._param_values: dict[str, tuple[float, int, int]] = {}  # name -> (value, type, receipt number)
@@ -308,21 +309,22 @@ class MavlinkVehicle:
     async def connect(self) -> None:
         _quiet_mavsdk_logs()
         from mavsdk.asyncio.mavsdk import Configuration, Mavsdk
-        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.component_type import ComponentType
 
         self._executor = DaemonCallExecutor()
         asyncio.get_running_loop().set_default_executor(self._executor)
         self._sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER))
         try:
-            await self._link_up(MavlinkDirectAsync)
+            await self._link_up()
         except BaseException:
             # Nothing is left to the garbage collector: it destroys MAVSDK in whatever thread collects, which
             # can abort the process (a caller that closes after a failed connect finds it closed).
             await self.close()
             raise
 
-    async def _link_up(self, direct_plugin) -> None:
+    async def _link_up(self) -> None:
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+
         try:
             await self._sdk.add_any_connection(mavsdk_connection_url(self.url))
         except Exception as error:
@@ -331,7 +333,11 @@ class MavlinkVehicle:
         if system is None:
             raise LinkLost(operation="connect", reason=f"no autopilot on {self.url} within "
                                                         f"{self.connect_timeout_s:g} s")
-        self._direct = direct_plugin(system)
+        self._direct = MavlinkDirectAsync(system)
+        # Sends go straight to the plugin under the asyncio wrapper, from this thread: sending queues the
+        # message and returns (no answer is awaited), where the wrapper starts a thread for each (a
+        # LANDING_TARGET and a PRELAND_PACE grant every few vehicle ms). The ctypes call releases the GIL.
+        self._sender = self._direct._plugin
         self._tasks.append(asyncio.ensure_future(self._listen()))
         self._tasks.append(asyncio.ensure_future(self._tick()))
         deadline = time.monotonic() + self.connect_timeout_s
@@ -557,11 +563,8 @@ class MavlinkVehicle:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         payload = {"target_system": self.system_id, "target_component": 1, **fields} if targeted else dict(fields)
-        # Sent from this thread: sending queues the message and returns (no answer is awaited), where the
-        # asyncio plugin would start a thread for each (a LANDING_TARGET and a PRELAND_PACE grant every few
-        # vehicle ms). The call releases the GIL, as every ctypes call into MAVSDK does.
-        self._direct._plugin.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
-                                                         target_component_id=1, fields_json=json.dumps(payload)))
+        self._sender.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
+                                                 target_component_id=1, fields_json=json.dumps(payload)))
 
     async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
         """Send COMMAND_LONG and await its COMMAND_ACK: which ACK of `command` it was on this link (1, 2, ...),
