@@ -311,3 +311,33 @@ def test_a_face_whose_companion_has_gone_runs_free_after_the_wall_bound(monkeypa
                 texts.append(message.text)  # and nothing sent meanwhile: the companion is silent
         assert any("pacing released" in t for t in texts)
         until(lambda: simulator.time_s > held_ms / 1000 + 0.5, timeout_s=30, what="the face to run free")
+
+
+def test_what_a_step_writes_leaves_in_datagrams_of_whole_frames_below_the_mtu():
+    """Several messages of one step share a datagram (so a reader is woken once a step, not once a message);
+    a burst larger than MAX_DATAGRAM_BYTES (the whole parameter list) is split between whole frames, and
+    every frame arrives."""
+    with serving(1) as (clients, _, _):
+        client = clients[0]
+        client.mav.request_data_stream_send(1, 1, mavlink2.MAV_DATA_STREAM_ALL, 50, 1)
+        client.mav.param_request_list_send(1, 1)
+        parser = mavlink2.MAVLink(None)
+        parser.robust_parsing = False
+        frames_per_datagram, sizes, names = [], [], set()
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline and (len(names) < len(ARDUPILOT_PARAM_NAMES) or len(sizes) < 200):
+            client.mav.heartbeat_send(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            client.port.settimeout(0.2)
+            try:
+                datagram = client.port.recv(65535)
+            except socket.timeout:
+                continue
+            messages = parser.parse_buffer(datagram) or []
+            assert parser.buf_len() == 0, "a datagram ends with a whole frame"
+            frames_per_datagram.append(len(messages))
+            sizes.append(len(datagram))
+            names.update(m.param_id for m in messages if m.get_type() == "PARAM_VALUE")
+    assert names == set(ARDUPILOT_PARAM_NAMES), "the whole list arrived"
+    assert max(sizes) <= mavlink_face.MAX_DATAGRAM_BYTES
+    assert max(sizes) > mavlink_face.MAX_DATAGRAM_BYTES - 280, "the list burst filled datagrams to the bound"
+    assert min(frames_per_datagram) >= 1 and max(frames_per_datagram) > 3

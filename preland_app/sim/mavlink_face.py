@@ -26,6 +26,11 @@ accepted; a read or set of an unknown name gets no answer; SYS_STATUS reports
 sensors as ArduCopter does with no fence; and a UDP port another process
 already holds is refused rather than silently shared.
 
+What one step writes to a port leaves in one datagram (several if it passes
+MAX_DATAGRAM_BYTES, split between frames), as a telemetry radio or
+mavlink-router packs frames; ArduPilot SITL sends a datagram a frame. A reader
+must take every frame of a datagram, as MAVSDK and pymavlink do.
+
 Pacing: the face runs on its clock (wall time times a speed-up) until a preland
 companion sends PRELAND_PACE. From then on the companion owns time: the face
 steps, without waiting for its clock, until the simulated time reaches the
@@ -139,6 +144,35 @@ def _refuse_busy_port(listen: str, address: str) -> None:
         probe.close()
 
 
+# What one step writes to a channel leaves as one datagram, not one per message (as a telemetry radio or
+# mavlink-router packs them): a datagram wakes the reader (MAVSDK's thread, the companion's loop), and most
+# steps that send anything send several messages. Below the Ethernet MTU, so a datagram crossing a network
+# is never fragmented.
+MAX_DATAGRAM_BYTES = 1400
+
+
+class _Datagrams:
+    """The channel's writer: frames queue until `flush` (the end of a step or of a hold's sending)."""
+
+    def __init__(self, connection) -> None:
+        self._connection = connection
+        self._frames: list[bytes] = []
+        self._size = 0
+
+    def write(self, frame: bytes) -> None:
+        if self._size + len(frame) > MAX_DATAGRAM_BYTES:
+            self.flush()
+        self._frames.append(frame)
+        self._size += len(frame)
+
+    def flush(self) -> None:
+        if self._frames:
+            datagram = b"".join(self._frames)
+            self._frames.clear()
+            self._size = 0
+            self._connection.write(datagram)
+
+
 class _Channel:
     """One MAVLink port, as an ArduPilot serial port: its own peer and its own stream rates."""
 
@@ -153,6 +187,8 @@ class _Channel:
         except OSError as error:
             raise MavlinkFaceError(f"--listen {listen!r}: {error.strerror or error}") from None
         self.mav = self.connection.mav
+        self.datagrams = _Datagrams(self.connection)
+        self.mav.file = self.datagrams  # pymavlink's sender writes its frames here
         self.intervals_s: dict[int, float] = {k: 1.0 / v for k, v in _STREAMS_DEFAULT_HZ.items()}
         self.next_send_s: dict[int, float] = {}
         # Sending first (udpclient) needs no peer to have spoken; listening waits for one.
@@ -252,6 +288,11 @@ class MavlinkFace(GroundStationServices):
             if channel.peer_seen:
                 self._channel = channel
                 self._send_streams()
+        self._send_written()
+
+    def _send_written(self) -> None:
+        for channel in self.channels:
+            channel.datagrams.flush()
 
     def _receive_everywhere(self) -> None:
         for channel in self.channels:
@@ -266,25 +307,28 @@ class MavlinkFace(GroundStationServices):
             self.pace_holds += 1
             self._channel = channel
             self._send_sim_state()
-            channel.connection.write(encode_frame(
+            channel.datagrams.write(encode_frame(
                 "PRELAND_PACE", {"target_system": 0, "target_component": 0, "time_boot_ms": self.time_boot_ms()},
                 system_id=channel.mav.srcSystem, component_id=channel.mav.srcComponent))
         self._receive_everywhere()
         self._flush_status_text()
-        if self.pace_until_s is None or not self._pace_answered or \
-                self.simulator.time_s < self.pace_until_s - 1e-9:
-            return  # a grant (or a release) came: step, or answer it
-        now_wall_s = time.monotonic()
-        if channel is not None and now_wall_s - self._pace_heard_wall_s > PACE_RELEASE_WALL_S:
-            self._release_pace()
-            self._say(f"pacing released: the companion said nothing for {PACE_RELEASE_WALL_S:g} s")
-            return
-        if now_wall_s - self._held_heartbeat_wall_s >= HOLD_HEARTBEAT_WALL_S:
-            self._held_heartbeat_wall_s = now_wall_s
-            for each in self.channels:
-                if each.peer_seen:
-                    self._channel = each
-                    self._send_heartbeat()
+        try:
+            if self.pace_until_s is None or not self._pace_answered or \
+                    self.simulator.time_s < self.pace_until_s - 1e-9:
+                return  # a grant (or a release) came: step, or answer it
+            now_wall_s = time.monotonic()
+            if channel is not None and now_wall_s - self._pace_heard_wall_s > PACE_RELEASE_WALL_S:
+                self._release_pace()
+                self._say(f"pacing released: the companion said nothing for {PACE_RELEASE_WALL_S:g} s")
+                return
+            if now_wall_s - self._held_heartbeat_wall_s >= HOLD_HEARTBEAT_WALL_S:
+                self._held_heartbeat_wall_s = now_wall_s
+                for each in self.channels:
+                    if each.peer_seen:
+                        self._channel = each
+                        self._send_heartbeat()
+        finally:
+            self._send_written()
         await self._readable(HOLD_WAIT_WALL_S)
 
     async def _readable(self, timeout_s: float) -> None:
@@ -315,6 +359,10 @@ class MavlinkFace(GroundStationServices):
 
     def _close(self) -> None:
         for channel in self.channels:
+            try:
+                channel.datagrams.flush()
+            except OSError:
+                pass
             channel.connection.close()
 
     def time_boot_ms(self) -> int:
