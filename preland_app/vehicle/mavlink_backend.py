@@ -77,8 +77,9 @@ COMMANDED_STATE_LIMIT_S = 30.0
 # A vehicle that sends nothing at all (no stamped message either) has its silence reckoned from wall time,
 # so at 8x the 5 vehicle s of link_timeout_s would be 0.6 wall s, and a stall of either process (a loaded
 # machine, a garbage collection) would read as a lost link. Such a link is lost only after this much wall time
-# of quiet too (up to 2.5x the 5 vehicle s alone decide; a SITL that has stopped is still found within 2 wall s).
-LINK_LOST_MIN_WALL_S = 2.0
+# of quiet too: MAVSDK's own heartbeat timeout (SystemImpl::_HEARTBEAT_TIMEOUT_S), after which it reports the
+# system disconnected. Up to 5/3x the 5 vehicle s alone decide; a SITL that has stopped is found within 3 wall s.
+LINK_LOST_MIN_WALL_S = 3.0
 # preland's own event loop has stalled (a loaded machine, a long synchronous step) when its tick has not run for
 # this long: what the vehicle sent meanwhile waits unread, so the silence seen is not yet the vehicle's.
 LOOP_STALL_WALL_S = 0.5
@@ -103,17 +104,31 @@ class VehicleTimeClock:
 
     The rate is vehicle seconds per wall second (1 for a real drone, the
     speed-up for SITL), estimated over the last seconds of messages, so a 30 s
-    timer is 30 vehicle seconds on every runtime.
+    timer is 30 vehicle seconds on every runtime. Messages read after nothing
+    was read for RATE_GAP_WALL_S (either process stalled, or the link) may have
+    waited in a queue and are read at once, so for BACKLOG_WALL_S after such a
+    gap the rate stands as it was measured before it.
     """
+
+    RATE_GAP_WALL_S = 0.5
+    BACKLOG_WALL_S = 0.25
 
     def __init__(self) -> None:
         self._samples: list[tuple[float, float]] = []  # (wall s, vehicle s)
+        self._fresh_from_wall = 0.0
         self.rate = 1.0
 
     def observe(self, vehicle_s: float) -> None:
         wall = time.monotonic()
         if self._samples and vehicle_s < self._samples[-1][1] - 1.0:
             self._samples.clear()  # the autopilot rebooted
+        elif self._samples and wall - self._samples[-1][0] > self.RATE_GAP_WALL_S:
+            # A 3 s stall of the companion's loop, measured across its backlog, read as 0.02x: a quiet link
+            # was then lost only after 250 wall s, and every sleep lasted 50 times too long.
+            self._fresh_from_wall = wall + self.BACKLOG_WALL_S
+        if wall < self._fresh_from_wall:
+            self._samples = [(wall, vehicle_s)]  # the newest time, for now_s; not the rate
+            return
         self._samples.append((wall, vehicle_s))
         while len(self._samples) > 2 and wall - self._samples[0][0] > 3.0:
             self._samples.pop(0)
