@@ -144,10 +144,9 @@ def _refuse_busy_port(listen: str, address: str) -> None:
         probe.close()
 
 
-# What one step writes to a channel leaves as one datagram, not one per message (as a telemetry radio or
-# mavlink-router packs them): a datagram wakes the reader (MAVSDK's thread, the companion's loop), and most
-# steps that send anything send several messages. Below the Ethernet MTU, so a datagram crossing a network
-# is never fragmented.
+# Datagrams of a step's frames (see the module): each datagram wakes its reader (MAVSDK's thread, then the
+# companion's loop), and most steps that send anything send several messages. Below the Ethernet MTU, so a
+# datagram crossing a network is never fragmented.
 MAX_DATAGRAM_BYTES = 1400
 
 
