@@ -324,8 +324,11 @@ def _real(**overrides) -> SitlOptions:
 @pytest.mark.parametrize("mode, sensor", [("irlock", None), ("marker", None), ("fused", None),
                                           ("cautious", "irlock"), ("cautious", "marker"), ("cautious", "fused")])
 def test_every_precision_mode_lands_on_real_sitl(thesis_mission, mode, sensor):
+    # At the speed-ups preland gives SITL's own physics (a camera land mode 2x, the others 10x): at 10x the
+    # companion, rendering and detecting in wall time, sent 14 LANDING_TARGETs for the marker in a `make test`
+    # run with PRELAND_SITL_BINARY set (its landing still within 20 cm).
     outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=1, land_mode=mode, sensor=sensor),
-                             options=_real())
+                             options=_real(speedup=None))
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert outcome.details["landing_targets_sent"] > 50
     assert outcome.landing_error_cm < 20.0
@@ -337,7 +340,7 @@ def test_the_paper_algorithms_land_on_real_sitl(mode):
     from preland_app.config.mission import load_mission
 
     mission = load_mission(ROOT / "missions" / "paper_marker_land.yaml")
-    outcome = run_sitl_trial(TrialRequest(mission=mission, seed=1, land_mode=mode), options=_real())
+    outcome = run_sitl_trial(TrialRequest(mission=mission, seed=1, land_mode=mode), options=_real(speedup=None))
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert outcome.landing_error_cm < 20.0
 
