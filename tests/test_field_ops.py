@@ -618,10 +618,10 @@ def test_the_vehicle_rate_is_not_bent_by_a_backlog_read_after_a_stall(monkeypatc
     10x throughout (measured across the backlog it read 0.02x, then 60x)."""
     import time
 
-    from preland_app.vehicle.mavlink_backend import VehicleTimeClock
+    from preland_app.vehicle.vehicle_time_clock import VehicleTimeClock
 
     wall = [1000.0]
-    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: wall[0])
+    monkeypatch.setattr("preland_app.vehicle.vehicle_time_clock.time.monotonic", lambda: wall[0])
     clock = VehicleTimeClock()
     vehicle_s, rates = 50.0, []
 

@@ -358,10 +358,7 @@ class MavlinkFace(GroundStationServices):
 
     def _close(self) -> None:
         for channel in self.channels:
-            try:
-                channel.datagrams.flush()
-            except OSError:
-                pass
+            channel.datagrams.flush()  # pymavlink's UDP write drops a socket error itself
             channel.connection.close()
 
     def time_boot_ms(self) -> int:
