@@ -9,8 +9,15 @@ altitude error in the hold, each step's response (10-90 % rise time, overshoot, 
 physics is served by `JsonBridge` from a thread of this process. Every process started is stopped on
 every path.
 
-Usage: python benchmarks/json_bridge_hover.py [--binary PATH] [--speedup N]
-       (binary: $PRELAND_SITL_BINARY; copter.parm from the binary's ArduPilot tree, else preland's copy)
+Then the GPS-only landing distribution on both physics: the thesis' Table 3 scenario without a precision
+sensor (`T3 none` of fault_scenarios_table.py: land mode normal, its weather, the same seeds 0..N-1 on both,
+flown through preland's SITL runtime: `physics=preland` in lock-step, `physics=ardupilot` at preland's
+speed-up for it), its landing errors' mean, standard deviation, quartiles and maximum side by side, and two
+two-sample tests of "the same distribution" (Mann-Whitney U and Kolmogorov-Smirnov, two-sided).
+
+Usage: python benchmarks/json_bridge_hover.py [--binary PATH] [--speedup N] [--landings N] [--workers N]
+       (binary: $PRELAND_SITL_BINARY; copter.parm from the binary's ArduPilot tree, else preland's copy;
+       --landings 0 skips the landings)
 """
 
 from __future__ import annotations
@@ -18,10 +25,12 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +38,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pymavlink import mavutil  # noqa: E402
+from scipy import stats  # noqa: E402
+from sitl_vs_embedded import fly_one  # noqa: E402
 
 from preland_app.runtime.sitl import PACKAGED_DEFAULTS, find_copter_defaults  # noqa: E402
 from preland_app.sim.json_bridge import JsonBridge  # noqa: E402
@@ -41,6 +52,8 @@ HOLD_S = 10.0
 STEP_ALT_M = 10.0  # the climb step's target; the descent step returns to TAKEOFF_ALT_M
 STEP_S = 12.0  # vehicle seconds each step is watched
 SETTLED_M = 0.1
+GPS_ONLY_LABEL = "T3 none"  # fault_scenarios_table.py's Table 3 scenario flown with land mode normal
+LANDING_RUNTIMES = (("sitl-preland", "JSON (preland quad X)"), ("sitl", "built-in --model + (ArduPilot's)"))
 POSITION_ONLY_MASK = 0b0000_1111_1111_1000  # SET_POSITION_TARGET_*: position only, no yaw
 # Parameters the JSON frame adds to copter.parm. copter.parm sets FRAME_TYPE 0 (plus), the frame of
 # `--model quad` (SIM_Frame.cpp: "quad" is quad_plus_motors); the JSON model is quad X (FRAME_TYPE 1,
@@ -318,17 +331,53 @@ def fmt(value: float | None, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
+def landings(binary: str, seeds: int, workers: int) -> None:
+    """The GPS-only landing distribution on both physics, side by side (see the module)."""
+    jobs = [(runtime, GPS_ONLY_LABEL, seed, binary, None) for seed in range(seeds) for runtime, _ in LANDING_RUNTIMES]
+    started = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        results = list(pool.map(fly_one, jobs, chunksize=1))
+    errors = {runtime: [r[4] for r in results if r[0] == runtime and r[3] == "landed" and r[4] is not None]
+              for runtime, _ in LANDING_RUNTIMES}
+
+    def quantile(values: list[float], share: float) -> float | None:
+        return statistics.quantiles(values, n=4, method="inclusive")[round(share * 4) - 1] if len(values) > 1 else None
+
+    rows = [("landed", lambda runtime, e: f"{len(e)}/{seeds}"),
+            ("mean error (cm)", lambda runtime, e: fmt(statistics.mean(e) if e else None, ".1f")),
+            ("standard deviation (cm)", lambda runtime, e: fmt(statistics.stdev(e) if len(e) > 1 else None, ".1f")),
+            ("lower quartile (cm)", lambda runtime, e: fmt(quantile(e, 0.25), ".1f")),
+            ("median (cm)", lambda runtime, e: fmt(statistics.median(e) if e else None, ".1f")),
+            ("upper quartile (cm)", lambda runtime, e: fmt(quantile(e, 0.75), ".1f")),
+            ("max (cm)", lambda runtime, e: fmt(max(e) if e else None, ".1f"))]
+    print(f"\nGPS-only landings ({GPS_ONLY_LABEL}: land mode normal), seeds 0..{seeds - 1} on both physics, "
+          "landing error from the pad")
+    print(f"{'physics':46s}" + "".join(f"{title:>34s}" for _, title in LANDING_RUNTIMES))
+    for label, value in rows:
+        print(f"{label:46s}" + "".join(f"{value(runtime, errors[runtime]):>34s}" for runtime, _ in LANDING_RUNTIMES))
+    for r in results:
+        if r[3] != "landed":
+            print(f"  {r[0]} seed {r[2]}: {r[3]} {r[8]}")
+    first, second = (errors[runtime] for runtime, _ in LANDING_RUNTIMES)
+    if len(first) > 1 and len(second) > 1:
+        print(f"same distribution? Mann-Whitney U two-sided p = "
+              f"{stats.mannwhitneyu(first, second, alternative='two-sided').pvalue:.3f}, "
+              f"Kolmogorov-Smirnov two-sided p = {stats.ks_2samp(first, second).pvalue:.3f}")
+    print(f"landings: wall time {time.perf_counter() - started:.0f} s with {workers} worker(s)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--binary", default=os.environ.get("PRELAND_SITL_BINARY"))
     parser.add_argument("--speedup", type=float, default=5.0)
     parser.add_argument("--only", choices=("json", "quad"), default=None)
+    parser.add_argument("--landings", type=int, default=10, help="GPS-only landings on each physics (0: none)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes flying the landings")
     args = parser.parse_args()
     if not args.binary:
         parser.error("give --binary or set PRELAND_SITL_BINARY to an arducopter SITL binary")
     physics = [args.only] if args.only else ["json", "quad"]
     reports = [run_one(args.binary, p, args.speedup) for p in physics]
-    own = subprocess.run(["pgrep", "-P", str(os.getpid())], capture_output=True, text=True).stdout.split()
     rows = [("physics", lambda r: "JSON (preland quad X)" if r.physics == "json" else "built-in --model quad (+)"),
             ("armed", lambda r: str(r.armed)), ("took off to 5 m", lambda r: str(r.took_off)),
             ("landed", lambda r: str(r.landed)),
@@ -356,6 +405,9 @@ def main() -> None:
             print(f"STATUSTEXT ({r.physics}):")
             for text in r.statustexts:
                 print("  " + text)
+    if args.landings > 0:
+        landings(args.binary, args.landings, args.workers)
+    own = subprocess.run(["pgrep", "-P", str(os.getpid())], capture_output=True, text=True).stdout.split()
     print(f"child processes left: {len(own)}")
 
 

@@ -45,7 +45,7 @@ SWEEP_LABEL = "T3 marker"
 # so at a high speedup it processes fewer frames per vehicle second than the camera's 30.
 
 
-def _one(job: tuple[str, str, int, str, float | None]) -> tuple:
+def fly_one(job: tuple[str, str, int, str, float | None]) -> tuple:
     """(runtime, label, seed, outcome, error cm, landing time s, wall s, speedup, message, camera Hz);
     runtime `embedded`, `sitl` (ArduPilot's physics) or `sitl-preland` (preland's, in lock-step)."""
     runtime, label, seed, binary, speedup = job  # speedup None: preland's default
@@ -77,7 +77,7 @@ def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup
             for seed in range(seeds) for runtime in (*sitl_runtimes, "embedded")]
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        results = list(pool.map(_one, jobs, chunksize=1))
+        results = list(pool.map(fly_one, jobs, chunksize=1))
     for runtime in sitl_runtimes:
         _table(results, runtime=runtime, labels=labels, seeds=seeds, speedup=speedup)
     print(f"wall time {time.perf_counter() - started:.0f} s with {workers} worker(s)")
@@ -131,7 +131,7 @@ def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int, label
         jobs = [("sitl", label, seed, binary, speedup) for seed in range(seeds)]
         started = time.perf_counter()
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            results = list(pool.map(_one, jobs, chunksize=1))
+            results = list(pool.map(fly_one, jobs, chunksize=1))
         wall_s = time.perf_counter() - started
         errors = {r[2]: r[4] for r in results if r[3] == "landed" and r[4] is not None}
         change = None
