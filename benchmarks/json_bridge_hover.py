@@ -340,15 +340,16 @@ def landings(binary: str, seeds: int, workers: int) -> None:
     errors = {runtime: [r[4] for r in results if r[0] == runtime and r[3] == "landed" and r[4] is not None]
               for runtime, _ in LANDING_RUNTIMES}
 
-    def quantile(values: list[float], share: float) -> float | None:
-        return statistics.quantiles(values, n=4, method="inclusive")[round(share * 4) - 1] if len(values) > 1 else None
+    def quartile(values: list[float], which: int) -> float | None:
+        """The lower (which 0) or upper (which 2) quartile."""
+        return statistics.quantiles(values, n=4, method="inclusive")[which] if len(values) > 1 else None
 
     rows = [("landed", lambda runtime, e: f"{len(e)}/{seeds}"),
             ("mean error (cm)", lambda runtime, e: fmt(statistics.mean(e) if e else None, ".1f")),
             ("standard deviation (cm)", lambda runtime, e: fmt(statistics.stdev(e) if len(e) > 1 else None, ".1f")),
-            ("lower quartile (cm)", lambda runtime, e: fmt(quantile(e, 0.25), ".1f")),
+            ("lower quartile (cm)", lambda runtime, e: fmt(quartile(e, 0), ".1f")),
             ("median (cm)", lambda runtime, e: fmt(statistics.median(e) if e else None, ".1f")),
-            ("upper quartile (cm)", lambda runtime, e: fmt(quantile(e, 0.75), ".1f")),
+            ("upper quartile (cm)", lambda runtime, e: fmt(quartile(e, 2), ".1f")),
             ("max (cm)", lambda runtime, e: fmt(max(e) if e else None, ".1f"))]
     print(f"\nGPS-only landings ({GPS_ONLY_LABEL}: land mode normal), seeds 0..{seeds - 1} on both physics, "
           "landing error from the pad")
