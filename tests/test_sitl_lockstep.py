@@ -106,3 +106,106 @@ def test_smoothed_sensors_tell_a_levelling_touchdown_as_a_rotation():
     assert min(roll_rates) < -0.5  # told it rolls back towards level
     assert abs(roll_rates[-1]) < 0.01  # and has stopped there
     assert abs(told.velocity_ned_m_s[2]) < 0.01
+
+
+def _run_on_played_bridge(main_factory) -> JsonBridge:
+    bridge = JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), port=0)
+    stop = threading.Event()
+    player = _play_sitl(bridge, stop)
+    try:
+        asyncio.run(asyncio.wait_for(main_factory(bridge), timeout=60))
+    finally:
+        stop.set()
+        bridge.gate.hold_at(None)
+        player.join(5)
+        bridge.stop()
+    return bridge
+
+
+def test_a_message_sent_holds_the_physics_until_mavsdk_has_had_time_to_send_it(monkeypatch):
+    """MAVSDK sends from a thread of its own: a message handed to it while the physics stands at a wake must
+    be in SITL's socket before SITL's next step, so the physics waits DELIVERY_WALL_S, even for a task that
+    reads no sensor and while another task's deadline lies ahead."""
+    import preland_app.vehicle.lockstep_clock as lockstep_clock
+
+    monkeypatch.setattr(lockstep_clock, "DELIVERY_WALL_S", 0.3)  # long enough to see the physics stand
+    seen: dict[str, object] = {}
+
+    async def main(bridge: JsonBridge) -> None:
+        clock = LockstepClock(gate=bridge.gate, stall_wall_s=30.0)
+
+        async def mission() -> None:
+            await clock.sleep(1.0)  # a deadline ahead, that the physics would otherwise run to
+
+        async def sender() -> None:
+            await clock.sleep(0.05)
+            seen["woken_s"] = bridge.latest_state.time_s
+            sending = asyncio.ensure_future(clock.sent())
+            samples = []
+            while not sending.done():
+                samples.append(bridge.latest_state.time_s)
+                await asyncio.sleep(0.01)
+            seen["during_s"], seen["samples"] = set(samples), len(samples)
+
+        await asyncio.gather(mission(), sender())
+
+    _run_on_played_bridge(main)
+    assert seen["samples"] >= 5
+    assert seen["during_s"] == {seen["woken_s"]}  # 0.3 wall s, with the physics free to run 0.95 vehicle s
+
+
+def test_an_exchange_runs_time_until_its_answer_is_read_then_holds_until_it_ends(monkeypatch):
+    """SITL answers only as time passes, so an exchange steps time on; once the answer is read off the link
+    the physics stands until the waiting task has it, however long that takes in wall time."""
+    import preland_app.vehicle.lockstep_clock as lockstep_clock
+
+    monkeypatch.setattr(lockstep_clock, "EXCHANGE_DELIVERY_WALL_S", 0.0)
+    seen: dict[str, float] = {}
+
+    async def main(bridge: JsonBridge) -> None:
+        clock = LockstepClock(gate=bridge.gate, stall_wall_s=30.0)
+        answered = False
+
+        async def mission() -> None:
+            await clock.sleep(5.0)
+
+        async def commander() -> None:
+            nonlocal answered
+            await clock.sleep(0.1)
+            with clock.exchanging(answered=lambda: answered):
+                start_s = clock.now_s()
+                while clock.now_s() < start_s + 0.05:  # time runs while no answer has come
+                    await asyncio.sleep(0.001)
+                answered = True
+                clock._update()  # as a wake after the answer's step would
+                await asyncio.get_running_loop().run_in_executor(
+                    None, lambda: until(lambda: bridge.gate.waiting, timeout_s=30, what="the physics at the hold"))
+                seen["answered_s"] = clock.now_s()
+                await asyncio.sleep(0.2)  # the answer on its way to the task, in wall time
+                seen["before_end_s"] = clock.now_s()
+            await clock.sleep(0.01)
+            seen["after_end_s"] = clock.now_s()
+
+        await asyncio.gather(mission(), commander())
+
+    _run_on_played_bridge(main)
+    assert seen["answered_s"] >= 0.15
+    assert seen["before_end_s"] == seen["answered_s"]
+    assert seen["after_end_s"] > seen["answered_s"]
+
+
+def test_the_receive_queue_of_a_udp_socket_is_read_from_the_kernel():
+    import socket
+
+    from preland_app.vehicle.lockstep_clock import udp_receive_queue
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as bound, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+        bound.bind(("127.0.0.1", 0))
+        port = bound.getsockname()[1]
+        assert udp_receive_queue(port) == 0
+        sender.sendto(b"x" * 100, ("127.0.0.1", port))
+        until(lambda: udp_receive_queue(port) > 0, timeout_s=10, what="the datagram in the socket's queue")
+        bound.recv(1000)
+        assert udp_receive_queue(port) == 0
+    assert udp_receive_queue(port, table="/nonexistent") == 0

@@ -56,7 +56,7 @@ from ..sim.json_bridge import JsonBridge, JsonBridgeTimeout
 from ..sim.multirotor import QuadXFrame, QuadXMultirotor
 from ..sim.spec import DEFAULT_HOME, NavigationSpec
 from ..sensing.virtual_camera import CameraPose
-from ..vehicle.lockstep_clock import MISSION_START_S, LockstepClock
+from ..vehicle.lockstep_clock import MISSION_START_S, LockstepClock, udp_receive_queue
 from ..vehicle.mavlink_backend import MavlinkVehicle
 from .base import RuntimeOptionError, TrialRequest, build_options
 from .mavlink import fly_mavlink
@@ -519,7 +519,8 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
         tlog_path = None
         if options.tlog_dir is not None:
             tlog_path = str(Path(options.tlog_dir) / (tlog_name or f"{mission.name}_seed{request.seed}.tlog"))
-        lockstep = LockstepClock(gate=sitl.bridge.gate) if sitl.bridge is not None else None
+        lockstep = LockstepClock(gate=sitl.bridge.gate, unread=functools.partial(udp_receive_queue, sitl.port)) \
+            if sitl.bridge is not None else None
         # In lock-step the GPS error moves on from the mission's start, which is at the same vehicle time
         # in every trial, so SITL's GPS is the same whenever the companion connected.
         start_s = MISSION_START_S if lockstep is not None else 0.0

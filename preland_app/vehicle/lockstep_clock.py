@@ -14,12 +14,15 @@ paced clock's (`paced_clock`) as far as SITL allows:
   detecting, sending its LANDING_TARGET) the physics holds where it is. So a frame shows the vehicle at
   the frame's time and its LANDING_TARGET is in SITL's socket before SITL's next step;
 - unlike the simulator's MAVLink face, SITL answers nothing while held: while a task waits for an answer
-  (a command and its COMMAND_ACK, a parameter: `exchanging`), time runs in EXCHANGE_STEP_S steps.
+  (a command and its COMMAND_ACK, a parameter: `exchanging`), time runs in EXCHANGE_STEP_S steps, until
+  the answer has been read off the link; then it holds until the task has it.
 
-Before the sleepers due at a hold wake, the companion takes in what SITL sent before it stopped there
-(`activity`, set by the vehicle: its count of messages received and calls returned; the sleepers wake once
-it has not changed for SETTLE_WALL_S), so what a task reads at a vehicle time does not depend on how fast
-this machine moved the messages along.
+Before the sleepers due at a hold wake, the companion takes in what SITL sent before it stopped there:
+first SITL finishes its loop (it writes out what the loop sent, then asks for the next step: the physics
+then waits at the hold), then the bytes in this machine's socket are read (`unread`), then the messages
+are taken in (`activity`, set by the vehicle: its count of messages received and calls returned; the
+sleepers wake once it has not changed for SETTLE_WALL_S). So what a task reads at a vehicle time does not
+depend on how fast this machine moved the messages along.
 
 A physics whose time stops while nothing holds it (SITL stopped or hung: it sends no servo packet) is
 found by a wall bound: LinkLost after `stall_wall_s`.
@@ -54,15 +57,24 @@ EXCHANGE_STEP_S = 0.0025
 # bound after it (wall s; a message later than that is read at a later vehicle time).
 SETTLE_WALL_S = 0.0005
 SETTLE_MAX_WALL_S = 0.05
+# How long MAVSDK's thread is given to send a message before the vehicle's time goes on (wall s).
+DELIVERY_WALL_S = 0.001
+# The same for a request that waits for an answer: MAVSDK sends it from a thread started for the call.
+EXCHANGE_DELIVERY_WALL_S = 0.005
+# How long SITL may take to finish its loop and ask for the next step before a wake goes on without it
+# (wall s; far more than the loop takes, short enough for a hold the physics never reaches).
+SITL_LOOP_MAX_WALL_S = 0.5
 
 
 class LockstepClock:
     """Vehicle seconds of the physics behind `gate`; see the module for the rules."""
 
-    def __init__(self, *, gate: StepGate, stall_wall_s: float = PHYSICS_STALL_WALL_S) -> None:
+    def __init__(self, *, gate: StepGate, stall_wall_s: float = PHYSICS_STALL_WALL_S,
+                 unread: Callable[[], int] | None = None) -> None:
         if stall_wall_s <= 0:
             raise ValueError("stall_wall_s must be positive")
         self._gate = gate
+        self._unread = unread  # the receive queue of this machine's socket from SITL (see the module)
         self.stall_wall_s = stall_wall_s
         self._loop: asyncio.AbstractEventLoop | None = None
         self._sleepers: list[tuple[float, int, asyncio.Future]] = []  # (deadline s, order, future): a heap
@@ -70,9 +82,12 @@ class LockstepClock:
         self._participants: set[asyncio.Task] = set()
         self._asleep: dict[asyncio.Task, float] = {}  # participant -> the deadline it sleeps to
         self._exchanges = 0
+        self._answered: list[Callable[[], bool]] = []  # of the exchanges running: is its answer in?
+        self._undelivered: list[Callable[[], bool]] = []  # of the exchanges running: has SITL its request?
+        self._sending = 0  # messages just handed to MAVSDK, given DELIVERY_WALL_S to leave
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
         self._settling = False
-        self.unsettled = 0  # holds whose messages were still coming at SETTLE_MAX_WALL_S
+        self.unsettled = 0  # wakes that went on before SITL asked for its next step or its messages stopped
         self.settles = 0
         self.settle_wall_s = 0.0  # wall s spent waiting for SITL's messages before wakes
         self._after_ready = AfterReady(self._apply)
@@ -157,20 +172,47 @@ class LockstepClock:
         """An exchange that needs no answer (a LANDING_TARGET sent): the physics keeps holding for it."""
         yield
 
+    async def sent(self) -> None:
+        """The running task has just handed a message to MAVSDK, which sends it from a thread of its own:
+        time stands for DELIVERY_WALL_S, so the message is in SITL's socket before SITL's next step."""
+        self._sending += 1
+        self._update()
+        try:
+            await asyncio.sleep(DELIVERY_WALL_S)
+        finally:
+            self._sending -= 1
+            self._update()
+
     @contextlib.contextmanager
-    def exchanging(self):
-        """The running task waits for the vehicle's answer, which SITL gives only while time passes: time
-        runs in EXCHANGE_STEP_S steps meanwhile, and a sensor task that waits holds none."""
+    def exchanging(self, answered: Callable[[], bool] | None = None):
+        """The running task waits for the vehicle's answer, which SITL gives only while time passes. Time
+        stands for EXCHANGE_DELIVERY_WALL_S first (MAVSDK sends the request from a thread of its own, and it
+        must be in SITL's socket before SITL's next step), then runs in EXCHANGE_STEP_S steps, and a sensor
+        task that waits holds none. Once `answered()` is true (the answer has been read off the link), time
+        holds until the exchange ends: how long the answer then takes to reach the waiting task is wall
+        time, which must not move the vehicle's."""
         task = asyncio.current_task()
         marked = task in self._participants and task not in self._asleep
         if marked:
             self._asleep[task] = math.inf
         self._exchanges += 1
+        entered_wall_s = time.monotonic()
+
+        def delivered() -> bool:
+            return time.monotonic() - entered_wall_s >= EXCHANGE_DELIVERY_WALL_S
+
+        self._undelivered.append(delivered)
+        if answered is not None:
+            self._answered.append(answered)
+        asyncio.get_running_loop().call_later(EXCHANGE_DELIVERY_WALL_S, self._update)
         self._update()
         try:
             yield
         finally:
             self._exchanges -= 1
+            self._undelivered.remove(delivered)
+            if answered is not None:
+                self._answered.remove(answered)
             if marked:
                 self._asleep.pop(task, None)
             self._update()
@@ -191,8 +233,10 @@ class LockstepClock:
             heapq.heappop(self._sleepers)
         now_s = self.now_s()
         wake_s = self._sleepers[0][0] if self._sleepers else math.inf
-        if self._holders():
-            hold_s = now_s  # a reading is being made: the vehicle waits for it
+        if (self._holders() or self._sending or any(answered() for answered in self._answered)
+                or not all(delivered() for delivered in self._undelivered)):
+            # A reading is being made, a request is on its way to SITL or an answer to its task: the vehicle waits.
+            hold_s = now_s
         elif self._exchanges:
             hold_s = wake_s = min(wake_s, now_s + EXCHANGE_STEP_S)  # told there, to step on
         else:
@@ -224,7 +268,18 @@ class LockstepClock:
     async def _settle_then_wake(self) -> None:
         started_wall_s = time.monotonic()
         try:
-            deadline_wall_s = started_wall_s + SETTLE_MAX_WALL_S
+            # SITL writes out what a loop sent before it asks for its next step (HAL_SITL: the loop, then
+            # the serial ports' ticks, then the next servo packet): once the physics stands at the hold
+            # with that packet, everything SITL sent up to this time is on its way here.
+            sitl_deadline_wall_s = started_wall_s + SITL_LOOP_MAX_WALL_S
+            while not self._gate.waiting:
+                if time.monotonic() > sitl_deadline_wall_s:
+                    self.unsettled += 1
+                    break
+                await asyncio.sleep(SETTLE_WALL_S)
+            deadline_wall_s = time.monotonic() + SETTLE_MAX_WALL_S
+            while self._unread is not None and self._unread() > 0 and time.monotonic() < deadline_wall_s:
+                await asyncio.sleep(0)
             seen = self.activity()
             while True:
                 await asyncio.sleep(SETTLE_WALL_S)
@@ -255,5 +310,24 @@ class LockstepClock:
         if holders:
             raise WaitTimeout(operation="lock-step clock: time to pass", timeout_s=round(silent_wall_s, 1),
                               last_state=f"sensor tasks {', '.join(holders)} hold the vehicle's time")
+        if any(answered() for answered in self._answered):
+            raise WaitTimeout(operation="lock-step clock: time to pass", timeout_s=round(silent_wall_s, 1),
+                              last_state="an answer read off the link has not reached the task waiting for it")
         raise LinkLost(operation="lock-step physics", reason=f"SITL sent no servo packet for "
                                                              f"{silent_wall_s:.0f} wall s")
+
+
+def udp_receive_queue(port: int, *, table: str = "/proc/net/udp") -> int:
+    """The receive queue (bytes the kernel holds for it, unread; 0 when all is read) of this machine's UDP
+    socket bound to `port`, from Linux's /proc/net/udp; 0 where the table cannot be read or has no such
+    socket."""
+    try:
+        with open(table, encoding="ascii") as rows:
+            next(rows, None)
+            for row in rows:
+                fields = row.split()
+                if len(fields) > 4 and int(fields[1].rpartition(":")[2], 16) == port:
+                    return int(fields[4].partition(":")[2], 16)
+    except (OSError, ValueError):
+        pass
+    return 0

@@ -27,6 +27,7 @@ import json
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,6 +49,8 @@ from .types import (
     VelocityNed,
 )
 from .vehicle_time_clock import VehicleTimeClock
+
+MAV_RESULT_IN_PROGRESS = 5  # a COMMAND_ACK that another, final one follows
 
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_CMD_NAV_TAKEOFF = 22
@@ -245,6 +248,7 @@ class MavlinkVehicle:
         self._commanded_mode: _Commanded | None = None
         self._acks_returned: dict[int, int] = {}  # MAV_CMD -> COMMAND_ACKs its calls have returned
         self._acks_streamed: dict[int, list[int]] = {}  # MAV_CMD -> per ACK on the message stream, HEARTBEATs before
+        self._final_acks_read: dict[int, int] = {}  # MAV_CMD -> final COMMAND_ACKs read on the message stream
         self._heartbeats_read = 0
 
     @property
@@ -375,6 +379,9 @@ class MavlinkVehicle:
                 self._heartbeat_confirms(fields)
             elif name == "COMMAND_ACK":
                 self._acks_streamed.setdefault(int(fields.get("command", -1)), []).append(self._heartbeats_read)
+                if int(fields.get("result", 0)) != MAV_RESULT_IN_PROGRESS:
+                    self._final_acks_read[int(fields.get("command", -1))] = \
+                        self._final_acks_read.get(int(fields.get("command", -1)), 0) + 1
             elif name == "PARAM_VALUE":
                 self._param_receipts += 1
                 param_id = str(fields.get("param_id", "")).rstrip("\x00")
@@ -505,10 +512,13 @@ class MavlinkVehicle:
         """Paced, the vehicle's time stands still during an exchange with it (as in virtual time)."""
         return self._paced_clock.holding() if self._paced_clock is not None else contextlib.nullcontext()
 
-    def _exchanging(self):
+    def _exchanging(self, answered: Callable[[], bool] | None = None):
         """An exchange that waits for the vehicle's answer: paced, time stands still (the simulator answers
-        while it holds); in lock-step with SITL, time runs for it (SITL answers only as time passes)."""
-        return self._lockstep.exchanging() if self._lockstep is not None else self._holding()
+        while it holds); in lock-step with SITL, time runs for it (SITL answers only as time passes) from
+        when SITL has the request until `answered()`, the answer read off the link."""
+        if self._lockstep is None:
+            return self._holding()
+        return self._lockstep.exchanging(answered=answered)
 
     async def _send(self, name: str, fields: dict[str, Any], *, targeted: bool = True) -> None:
         with self._holding():
@@ -520,11 +530,14 @@ class MavlinkVehicle:
         payload = {"target_system": self.system_id, "target_component": 1, **fields} if targeted else dict(fields)
         self._sender.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
                                                  target_component_id=1, fields_json=json.dumps(payload)))
+        if self._lockstep is not None:
+            await self._lockstep.sent()
 
     async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
         """Send COMMAND_LONG and await its COMMAND_ACK: which ACK of `command` it was on this link (1, 2, ...),
         or None without one (`check=False`)."""
-        with self._exchanging():
+        acks_before = self._final_acks_read.get(command, 0)
+        with self._exchanging(answered=lambda: self._final_acks_read.get(command, 0) > acks_before):
             return await self._command_now(command, *params, operation=operation, check=check)
 
     async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
