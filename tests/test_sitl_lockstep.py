@@ -209,3 +209,44 @@ def test_the_receive_queue_of_a_udp_socket_is_read_from_the_kernel():
         bound.recv(1000)
         assert udp_receive_queue(port) == 0
     assert udp_receive_queue(port, table="/nonexistent") == 0
+
+
+def test_a_wake_takes_in_what_sitl_sent_in_the_loop_of_its_step_however_slow_that_loop():
+    """SITL runs its loop after each answer (sending its messages) and only then asks for the next step:
+    a task woken at a deadline must see everything the loop of that step sent, even when the loop takes
+    far longer than the settle's quiet window."""
+    import time
+
+    bridge = JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), port=0)
+    stop = threading.Event()
+    sent = [0]  # the steps whose loop has sent its messages
+    pwm = [round(QuadXFrame().hover_pwm_us()) - 50] * 4 + [0] * 12
+
+    def slow_sitl() -> None:
+        frame = 0
+        while not stop.is_set():
+            bridge.handle(build_servo_packet(frame_rate_hz=FRAME_RATE_HZ, frame_count=frame, pwm_us=pwm))
+            time.sleep(0.004)  # the loop: eight times the settle's quiet window
+            sent[0] = bridge.counters.steps
+            frame += 1
+
+    seen: list[tuple[int, int]] = []
+
+    async def main() -> None:
+        clock = LockstepClock(gate=bridge.gate, stall_wall_s=30.0)
+        clock.activity = lambda: sent[0]
+        for _ in range(20):
+            await clock.sleep(0.01)
+            seen.append((sent[0], bridge.counters.steps))
+
+    player = threading.Thread(target=slow_sitl, name="slow-sitl", daemon=True)
+    player.start()
+    try:
+        asyncio.run(asyncio.wait_for(main(), timeout=60))
+    finally:
+        stop.set()
+        bridge.gate.hold_at(None)
+        player.join(5)
+        bridge.stop()
+    assert len(seen) == 20
+    assert all(messages == steps for messages, steps in seen), seen
