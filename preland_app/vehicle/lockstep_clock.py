@@ -87,6 +87,7 @@ class LockstepClock:
         self._sending = 0  # messages just handed to MAVSDK, given DELIVERY_WALL_S to leave
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
         self._settling = False
+        self.waiting_for_sitl = False  # a wake waits for SITL to finish its loop and ask for the next step
         self.unsettled = 0  # wakes that went on before SITL asked for its next step or its messages stopped
         self.settles = 0
         self.settle_wall_s = 0.0  # wall s spent waiting for SITL's messages before wakes
@@ -272,11 +273,13 @@ class LockstepClock:
             # the serial ports' ticks, then the next servo packet): once the physics stands at the hold
             # with that packet, everything SITL sent up to this time is on its way here.
             sitl_deadline_wall_s = started_wall_s + SITL_LOOP_MAX_WALL_S
+            self.waiting_for_sitl = True
             while not self._gate.waiting:
                 if time.monotonic() > sitl_deadline_wall_s:
                     self.unsettled += 1
                     break
                 await asyncio.sleep(SETTLE_WALL_S)
+            self.waiting_for_sitl = False
             deadline_wall_s = time.monotonic() + SETTLE_MAX_WALL_S
             while self._unread is not None and self._unread() > 0 and time.monotonic() < deadline_wall_s:
                 await asyncio.sleep(0)

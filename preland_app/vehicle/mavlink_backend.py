@@ -378,10 +378,10 @@ class MavlinkVehicle:
                 self._heartbeats_read += 1
                 self._heartbeat_confirms(fields)
             elif name == "COMMAND_ACK":
-                self._acks_streamed.setdefault(int(fields.get("command", -1)), []).append(self._heartbeats_read)
+                acked = int(fields.get("command", -1))
+                self._acks_streamed.setdefault(acked, []).append(self._heartbeats_read)
                 if int(fields.get("result", 0)) != MAV_RESULT_IN_PROGRESS:
-                    self._final_acks_read[int(fields.get("command", -1))] = \
-                        self._final_acks_read.get(int(fields.get("command", -1)), 0) + 1
+                    self._final_acks_read[acked] = self._final_acks_read.get(acked, 0) + 1
             elif name == "PARAM_VALUE":
                 self._param_receipts += 1
                 param_id = str(fields.get("param_id", "")).rstrip("\x00")
