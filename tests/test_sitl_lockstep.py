@@ -12,7 +12,7 @@ from preland_app.sim.sitl_json import build_servo_packet
 from preland_app.sim.step_gate import StepGate
 from preland_app.vehicle.lockstep_clock import LockstepClock
 
-from .waiting import until
+from .waiting import until, until_async
 
 FRAME_RATE_HZ = 1200  # ArduCopter SITL's physics rate
 
@@ -170,8 +170,8 @@ def test_an_exchange_runs_time_until_its_answer_is_read_then_holds_until_it_ends
             await clock.sleep(0.1)
             with clock.exchanging(answered=lambda: answered):
                 start_s = clock.now_s()
-                while clock.now_s() < start_s + 0.05:  # time runs while no answer has come
-                    await asyncio.sleep(0.001)
+                await until_async(lambda: clock.now_s() >= start_s + 0.05, timeout_s=30,
+                                  what="time to run in the exchange while no answer has come")
                 answered = True
                 clock._update()  # as a wake after the answer's step would
                 await asyncio.get_running_loop().run_in_executor(
