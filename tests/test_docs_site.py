@@ -19,9 +19,12 @@ from .conftest import ROOT
 from .tools import browser
 
 
-# The pictures the build makes (docs/figures/), each linked from at least one page.
-FIGURES = ("mission", "data-flow", "report-errors", "report-positions", "report-trajectory", "report-ecdf",
-           "pad-thesis", "pad-paper", "cautious-states", "module-map")
+# The pictures the build makes (docs/figures/), each linked from at least one page: the diagrams sized for page
+# width, the report's own figures wider.
+DIAGRAMS = ("mission", "data-flow", "pad-thesis", "pad-paper", "cautious-states", "module-map")
+REPORT_FIGURES = ("report-errors", "report-positions", "report-trajectory", "report-ecdf")
+FIGURES = DIAGRAMS + REPORT_FIGURES
+PNG_LIMIT_BYTES = 300_000
 HISTORY_WORDS = re.compile(r"this stop|previous stop|the version before|last stop", re.IGNORECASE)
 
 
@@ -42,6 +45,17 @@ def site(tmp_path_factory) -> Path:
                             cwd=ROOT, capture_output=True, text=True, timeout=900, env=env)
     assert result.returncode == 0, result.stderr[-4000:]
     return out
+
+
+def check_png(path: Path, *, min_width: int = 900, max_width: int = 2300) -> None:
+    """A readable PNG of a size for the site, not blank."""
+    assert path.is_file(), path
+    assert path.stat().st_size <= PNG_LIMIT_BYTES, (path.name, path.stat().st_size)
+    image = cv2.imread(str(path))
+    assert image is not None, path
+    height, width = image.shape[:2]
+    assert min_width <= width <= max_width and 300 <= height <= 2400, (path.name, width, height)
+    assert image.std() > 10, f"{path.name} is blank"
 
 
 def test_the_generated_reference_is_what_the_code_gives_now():
@@ -73,10 +87,11 @@ def test_the_reference_states_the_checks_the_loader_makes():
 
 def test_the_site_builds_strictly_with_every_picture(site):
     assert (site / "index.html").is_file() and (site / "reference" / "cli" / "index.html").is_file()
-    for name in FIGURES:
-        image = cv2.imread(str(site / "figures" / f"{name}.png"))
-        assert image is not None, name
-        assert image.shape[0] >= 200 and image.shape[1] >= 300, (name, image.shape)
+    assert sorted(path.stem for path in (site / "figures").iterdir()) == sorted(FIGURES)
+    for name in DIAGRAMS:
+        check_png(site / "figures" / f"{name}.png", max_width=1500)
+    for name in REPORT_FIGURES:
+        check_png(site / "figures" / f"{name}.png")
     pages = "".join(path.read_text() for path in (ROOT / "docs").rglob("*.md"))
     for name in FIGURES:
         assert f"figures/{name}.png" in pages, f"no page shows {name}.png"
