@@ -40,9 +40,9 @@ def square_trial(thesis_mission):
 
 # The longest test files (by `pytest --durations=0`, summed per file), first. `make test` gives each xdist
 # worker whole files (--dist loadfile, --no-loadscope-reorder: in collection order, not by test count), so a
-# long file collected late runs alone at the end while the other workers idle. xdist starts each of the 4
-# workers on two files, the first four and the next four in turn: the longest is paired with the shortest of
-# those. Any file not named keeps its place after these.
+# long file collected late runs alone at the end while the other workers idle. xdist starts each of the N
+# workers (`-n` in the Makefile) on two files, the first N and the next N in turn: the longest is paired with
+# the shortest of those. Any file not named keeps its place after these.
 LONGEST_FIRST = ("test_docs_tutorials.py", "test_campaign_ray.py", "test_field_campaign.py", "test_mavlink_camera.py",
                  "test_mavlink_runtime.py", "test_docs_site.py", "test_calibrate.py", "test_sitl_failures.py",
                  "test_sitl.py", "test_runtimes.py", "test_campaign_drivers.py", "test_roi_render.py",
