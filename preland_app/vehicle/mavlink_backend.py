@@ -99,8 +99,25 @@ CLOSE_CALLS_WALL_S = 2.0  # at close, how long MAVSDK calls still running are wa
 PARAM_TRIES = 3
 PARAM_TIMEOUT_S = 1.5  # wall seconds per try
 FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
+# Paced and in lock-step, the vehicle answers a command within its own time, which this process grants: an
+# answer is late in wall time only because this machine is busy. MAVSDK resends a command whose COMMAND_ACK
+# is late (after 0.5 wall s by default), and the vehicle carries the copy out as a second command, maybe after
+# a later one (a DO_SET_MODE GUIDED after LAND reads as a pilot takeover). Over this machine's own UDP nothing
+# is lost, so there MAVSDK waits this long before a resend (wall s).
+LOCAL_COMMAND_RESEND_WALL_S = 5.0
 MESSAGE_IDS = {"HEARTBEAT": 0, "GLOBAL_POSITION_INT": 33, "LOCAL_POSITION_NED": 32, "ATTITUDE": 30, "EXTENDED_SYS_STATE": 245,
                "SYS_STATUS": 1, "GPS_RAW_INT": 24, "HOME_POSITION": 242, "DISTANCE_SENSOR": 132, "SIM_STATE": 108}
+
+
+def _set_command_resend_wall_s(sdk: Any, wall_s: float) -> None:
+    """MAVSDK's wait for an answer before it resends (`Mavsdk::set_timeout_s`), which its Python package
+    does not wrap: set through its C library."""
+    import ctypes
+
+    inner = sdk._mavsdk
+    setter = inner._lib.mavsdk_set_timeout_s
+    setter.argtypes, setter.restype = [ctypes.c_void_p, ctypes.c_double], None
+    setter(inner._handle, wall_s)
 
 
 def _quiet_mavsdk_logs() -> None:
@@ -273,6 +290,8 @@ class MavlinkVehicle:
         self._executor = DaemonCallExecutor()
         asyncio.get_running_loop().set_default_executor(self._executor)
         self._sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER))
+        if self.paced or self._lockstep is not None:
+            _set_command_resend_wall_s(self._sdk, LOCAL_COMMAND_RESEND_WALL_S)
         try:
             await self._link_up()
         except BaseException:
