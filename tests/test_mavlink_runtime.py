@@ -2,6 +2,7 @@
 
 import asyncio
 import threading
+import time
 
 import pytest
 
@@ -197,8 +198,18 @@ def fly_paced(mission, *, seed: int, **request) -> tuple:
 
 def _silence_heartbeats_in_flight(mission, *, seed: int, paced: bool, speedup: float = SPEEDUP) -> tuple:
     """Fly `mission` and silence the face's HEARTBEAT once the vehicle is in the air: (outcome, vehicle time
-    of the silence, vehicle time the trial ended at)."""
+    of the silence, vehicle time the trial ended at). Paced, the trial ends where the companion lets the face
+    go (its PRELAND_PACE 0): the face then runs free, so its time when the trial's result is in is later."""
     served = ServedSimulator(mission, seed=seed, speedup=speedup, paced=paced)
+    released_at = []
+    release = served.face._release_pace
+
+    def recording_release():  # on the face's own loop
+        if not released_at:
+            released_at.append(served.simulator.time_s)
+        release()
+
+    served.face._release_pace = recording_release
 
     async def main():
         trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=mission, seed=seed), url=served.url,
@@ -214,6 +225,10 @@ def _silence_heartbeats_in_flight(mission, *, seed: int, paced: bool, speedup: f
         served.loop.call_soon_threadsafe(silence)
         silenced_at = await asyncio.wait_for(silenced, timeout=PATIENCE_S)
         outcome = await asyncio.wait_for(trial, timeout=PATIENCE_S)
+        if paced:  # the companion's PRELAND_PACE 0 may reach the face after the trial's result is in here
+            await until_async(lambda: bool(released_at), timeout_s=PATIENCE_S,
+                              what="the companion to let the face go at the trial's end")
+            return outcome, silenced_at, released_at[0]
         return outcome, silenced_at, served.simulator.time_s
 
     try:
@@ -328,3 +343,28 @@ def test_in_lock_step_a_lost_heartbeat_is_reckoned_in_vehicle_seconds(thesis_mis
     assert outcome.outcome is Outcome.LINK_LOST and "vehicle s in lock-step" in outcome.message
     # HEARTBEATs came at 10 Hz of vehicle time: lost 5 vehicle s after the last, give or take a grant.
     assert 4.8 <= ended_at - silenced_at <= 5.5, (silenced_at, ended_at)
+
+
+def test_a_paced_command_answered_late_in_wall_time_reaches_the_vehicle_once(short_mission):
+    """MAVSDK resends a command whose COMMAND_ACK is late in wall time; paced, a late answer only means a busy
+    machine, and a copy of GUIDED carried out after LAND read as a pilot takeover. The face answers the
+    first DO_SET_MODE a wall second late: the vehicle still gets each mode change once, in order."""
+    served = ServedSimulator(short_mission, seed=3, paced=True)
+    modes_received = []
+    handle = served.face._on_command_long
+
+    def answering_the_first_mode_change_late(message):  # on the face's loop: nothing else runs meanwhile
+        if message.command == 176:  # MAV_CMD_DO_SET_MODE
+            modes_received.append(FlightMode(int(message.param2)))
+            if len(modes_received) == 1:
+                time.sleep(1.0)  # not a wait: the late answer itself, twice MAVSDK's default resend time
+        handle(message)
+
+    served.face._on_command_long = answering_the_first_mode_change_late
+    try:
+        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=short_mission, seed=3, land_mode="irlock"),
+                                          url=served.url, paced=True))
+    finally:
+        served.stop()
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    assert modes_received == [FlightMode.GUIDED, FlightMode.LAND]
