@@ -1,19 +1,14 @@
-"""Campaigns on Ray: the same rows as local processes, retried workers, killed and concurrent drivers,
-Ctrl-C, SITL nodes, and no Ray process left behind. One local Ray instance (2 CPUs) serves the module."""
+"""Campaigns on Ray in this process: the same rows as local processes, a trial that raises, a retried worker,
+SITL nodes, the Python API, OpenCV's threads and a Ray address checked. One local Ray instance (2 CPUs)
+serves the module (`ray_support.cluster`); the drivers in processes of their own are in
+test_campaign_ray_drivers.py, which `make test` runs on another worker meanwhile."""
 
-import logging
 import os
 import signal
-import sqlite3
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
-import ray
-
-from .tools.terminal import as_from_a_terminal
 from typer.testing import CliRunner
 
 from preland_app.campaign.driver import run_campaign
@@ -25,130 +20,12 @@ from preland_app.cli import app
 from preland_app.runtime.sitl import SITL_ENV, SitlOptions, SitlRuntime
 
 from .conftest import ROOT
-from .test_campaign import QUICK, comparable, write_campaign
+from .ray_support import NODE_SITL, alive, cluster, cmdline, descendants  # noqa: F401 (cluster: a fixture)
+from .test_campaign import comparable, write_campaign
 
-# One local Ray instance for the whole session: `make test` hands each module to one xdist worker
-# (--dist loadfile), so this module's tests share it (a start costs about 15 s).
 pytestmark = pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find Ray's processes")
 
 ROW = ("scenario", "trial_index", "seed", "outcome", "message")
-NODE_SITL = "/bin/false"  # the SITL binary this test's Ray node advertises: one that exits at once
-
-
-def _descendants(pid: int) -> set[int]:
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                parent = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(parent, []).append(int(entry.name))
-    found, stack = set(), [pid]
-    while stack:
-        for child in children.get(stack.pop(), []):
-            found.add(child)
-            stack.append(child)
-    return found
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return "State:\tZ" not in Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return False
-
-
-def _cmdline(pid: int) -> str:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return ""
-
-
-def _ray_processes(pid: int) -> set[int]:
-    """Ray's processes under `pid`: its servers (from Ray's package) and its workers ("ray::...")."""
-    return {child for child in _descendants(pid)
-            if "site-packages/ray/" in _cmdline(child) or _cmdline(child).startswith("ray::")}
-
-
-def _wait_gone(pids: set[int], timeout_s: float = 60.0) -> list[str]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and any(_alive(pid) for pid in pids):
-        time.sleep(0.2)
-    return [_cmdline(pid)[:80] for pid in pids if _alive(pid)]
-
-
-@pytest.fixture(scope="session")
-def cluster():
-    """A local Ray instance with 2 CPUs and one `sitl` slot, whose nodes' $PRELAND_SITL_BINARY is NODE_SITL;
-    stopped at the end of the session, leaving no Ray process behind."""
-    previous = os.environ.get(SITL_ENV)
-    os.environ[SITL_ENV] = NODE_SITL  # what Ray's processes inherit: the node's environment
-    try:
-        ray.init(address="local", num_cpus=2, resources={"sitl": 1}, include_dashboard=False,
-                 logging_level=logging.WARNING, log_to_driver=False)
-    finally:
-        if previous is None:
-            os.environ.pop(SITL_ENV)
-        else:
-            os.environ[SITL_ENV] = previous
-    address = ray.get_runtime_context().gcs_address
-    yield address
-    started = _ray_processes(os.getpid())
-    ray.shutdown()
-    assert started and _wait_gone(started) == []
-
-
-def _stored(db: Path) -> int:
-    try:
-        with sqlite3.connect(db) as connection:
-            return connection.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
-    except sqlite3.OperationalError:
-        return 0
-
-
-# The bound on a driver's waits is for one that hangs, not a speed target: a Ray driver on a loaded 2-core
-# machine takes minutes to start and run a few trials.
-DRIVER_HANG_S = 600.0
-
-
-def _stopped_and_said(process: subprocess.Popen) -> str:
-    """Stop `process` if it still runs; the end of what it wrote to stderr."""
-    if process.poll() is None:
-        process.terminate()
-    return process.communicate(timeout=60)[1].decode(errors="replace")[-2000:]
-
-
-def _wait_stored(db: Path, count: int, process: subprocess.Popen, timeout_s: float = DRIVER_HANG_S) -> int:
-    """Wait until `db` holds `count` trials while `process` runs."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and process.poll() is None:
-        stored = _stored(db)
-        if stored >= count:
-            return stored
-        time.sleep(0.05)
-    running = process.poll() is None
-    said = _stopped_and_said(process)
-    raise AssertionError(f"{count} trials were not stored ({_stored(db)} were) "
-                         f"{f'within {timeout_s:g} s' if running else 'before the driver ended'}: {said}")
-
-
-def _finished(db: Path, process: subprocess.Popen, timeout_s: float = DRIVER_HANG_S) -> str:
-    """Wait until the driver `process` ends; its stderr. One that has not ended within the bound is stopped,
-    and the failure says how many trials `db` holds."""
-    try:
-        return process.communicate(timeout=timeout_s)[1].decode(errors="replace")
-    except subprocess.TimeoutExpired:
-        said = _stopped_and_said(process)
-        raise AssertionError(f"the driver did not end within {timeout_s:g} s ({_stored(db)} trials stored): "
-                             f"{said}") from None
-
-
-def _driver(args: list[str], **kwargs) -> subprocess.Popen:
-    env = {key: value for key, value in os.environ.items() if key != "RAY_ADDRESS"}
-    return subprocess.Popen([sys.executable, "-m", "preland_app.cli", "campaign", "run", *args, "--quiet"],
-                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kwargs)
 
 
 def test_smoke_gives_the_same_rows_on_ray_as_on_local_processes(cluster, tmp_path):
@@ -198,7 +75,7 @@ class KillingRayExecutor(RayExecutor):
             return
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:  # a worker running a trial carries Ray's title "ray::run_job"
-            running = [pid for pid in _descendants(os.getpid()) if _cmdline(pid).startswith("ray::run_job")]
+            running = [pid for pid in descendants(os.getpid()) if cmdline(pid).startswith("ray::run_job")]
             if running:
                 os.kill(running[0], signal.SIGKILL)
                 self.killed.append(running[0])
@@ -213,72 +90,10 @@ def test_a_ray_worker_killed_mid_trial_is_retried_and_every_trial_stored_once(cl
     with ResultsStore(tmp_path / "k.db") as store:
         assert run_campaign(campaign, store, executor=executor) == (3, 3)
         trials = store.trials("killed")
-    assert len(executor.killed) == 1 and not _alive(executor.killed[0])
+    assert len(executor.killed) == 1 and not alive(executor.killed[0])
     assert [t["trial_index"] for t in trials] == [0, 1, 2]
     # The killed trial ran again (else it would be stored as "the worker process running this trial died").
     assert [t["outcome"] for t in trials] == ["landed"] * 3, [t["message"] for t in trials]
-
-
-def test_a_sigkilled_ray_driver_resumes_to_the_rows_of_an_uninterrupted_run(cluster, tmp_path):
-    path = write_campaign(tmp_path, QUICK.replace("trials: 3", "trials: 5"))
-    db = tmp_path / "killed.db"
-    first = _driver([str(path), "--db", str(db), "--executor", "ray", "--ray-address", cluster])
-    assert 2 <= _wait_stored(db, 2, first) < 10
-    first.kill()
-    first.wait(timeout=10)
-    result = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(db), "--resume", "--quiet",
-                                      "--executor", "ray"])
-    assert result.exit_code == 0, result.output
-    with ResultsStore(db) as resumed, ResultsStore(":memory:") as straight:
-        run_campaign(load_campaign(path), straight, workers=1)
-        keys = [(t["scenario"], t["trial_index"]) for t in resumed.trials("quick")]
-        assert len(keys) == 10 and len(set(keys)) == 10
-        assert comparable(resumed, "quick") == comparable(straight, "quick")
-
-
-def test_two_ray_drivers_at_once_one_is_refused_and_every_trial_is_stored_once(cluster, tmp_path):
-    path = write_campaign(tmp_path, QUICK.replace("trials: 3", "trials: 6"))
-    db = tmp_path / "busy.db"
-    first = _driver([str(path), "--db", str(db), "--executor", "ray", "--ray-address", cluster])
-    _wait_stored(db, 1, first)
-    second = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(db), "--resume", "--quiet",
-                                      "--executor", "ray"])
-    assert first.poll() is None, "the first driver should still be running"
-    assert second.exit_code == 1 and "Traceback" not in second.output, second.output
-    assert len(second.stderr.strip().splitlines()) == 1
-    assert f"being run by another driver (pid {first.pid} on host" in second.stderr and "ray executor" in second.stderr
-    stderr = _finished(db, first)
-    assert first.returncode == 0, stderr
-    with ResultsStore(db) as store:
-        keys = [(t["scenario"], t["trial_index"]) for t in store.trials("quick")]
-        assert len(keys) == 12 and len(set(keys)) == 12
-
-
-def test_ctrl_c_stops_a_ray_campaign_with_130_and_a_resumed_one_ends_leaving_no_ray_process(cluster, tmp_path):
-    path = write_campaign(tmp_path, QUICK.replace("trials: 3", "trials: 5"))
-    db = tmp_path / "interrupted.db"
-    args = [str(path), "--db", str(db), "--executor", "ray", "--workers", "1"]
-    driver = _driver(args, start_new_session=True, preexec_fn=as_from_a_terminal)
-    _wait_stored(db, 1, driver)
-    started = _ray_processes(driver.pid)
-    assert any("raylet" in _cmdline(pid) for pid in started), "the driver starts a local Ray instance of its own"
-    os.killpg(driver.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the whole foreground process group
-    _, stderr = driver.communicate(timeout=60)
-    assert driver.returncode == 130, stderr
-    assert "interrupted:" in stderr.decode() and "Traceback" not in stderr.decode()
-    assert _wait_gone(started) == []
-    with ResultsStore(db) as store:
-        assert 1 <= len(store.trials("quick")) < 10
-
-    resumed = _driver([*args, "--resume"])
-    _wait_stored(db, 9, resumed)
-    started = _ray_processes(resumed.pid)
-    stderr = _finished(db, resumed)
-    assert resumed.returncode == 0, stderr
-    assert started and _wait_gone(started) == []
-    with ResultsStore(db) as store:
-        keys = [(t["scenario"], t["trial_index"]) for t in store.trials("quick")]
-        assert len(keys) == 10 and len(set(keys)) == 10
 
 
 def test_sitl_trials_need_sitl_nodes_and_use_their_binary_and_a_trial_must_fit_a_node(cluster, tmp_path, monkeypatch):
@@ -313,6 +128,8 @@ def test_the_python_api_runs_a_campaign_on_ray(cluster, tmp_path):
 def test_a_ray_trial_runs_opencv_on_as_many_threads_as_cpus_it_asked_for(cluster):
     """Ray sizes OMP_NUM_THREADS to a task's CPUs but not OpenCV's own pool, which would take the node's
     every core; the task sets it before the trial."""
+    import ray
+
     from preland_app.campaign.executors.ray import run_job_in_ray_worker
     from preland_app.campaign.spec import resolve_scenarios
     from preland_app.campaign.trials import plan_trials
@@ -338,6 +155,8 @@ def test_an_address_asked_for_is_checked_even_when_this_process_joined_a_cluster
     with socket.socket() as closed:
         closed.bind(("127.0.0.1", 0))
         port = closed.getsockname()[1]  # nothing listens there once the socket is closed
+    import ray
+
     assert ray.is_initialized()  # the module's cluster: joined, and not the address asked for
     path = write_campaign(tmp_path, "name: elsewhere\ntrials: 1\nscenarios: [{label: gps, land: normal}]\n")
     result = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(tmp_path / "r.db"), "--quiet",

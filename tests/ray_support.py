@@ -1,0 +1,137 @@
+"""A local Ray instance for a test module, and the processes Ray and preland's Ray drivers start.
+
+`make test` hands each module to one xdist worker (--dist loadfile): the modules that use `cluster` each start
+one Ray instance (2 CPUs, one `sitl` slot) for their tests, and each waits for its drivers on its own worker."""
+
+import logging
+import os
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from preland_app.runtime.sitl import SITL_ENV
+
+from .conftest import ROOT
+
+NODE_SITL = "/bin/false"  # the SITL binary the Ray node advertises: one that exits at once
+# The bound on a driver's waits is for one that hangs, not a speed target: a Ray driver on a loaded 2-core
+# machine takes minutes to start and run a few trials.
+DRIVER_HANG_S = 600.0
+
+
+def descendants(pid: int) -> set[int]:
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                parent = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(parent, []).append(int(entry.name))
+    found, stack = set(), [pid]
+    while stack:
+        for child in children.get(stack.pop(), []):
+            found.add(child)
+            stack.append(child)
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        return "State:\tZ" not in Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+
+
+def cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
+def ray_processes(pid: int) -> set[int]:
+    """Ray's processes under `pid`: its servers (from Ray's package) and its workers ("ray::...")."""
+    return {child for child in descendants(pid)
+            if "site-packages/ray/" in cmdline(child) or cmdline(child).startswith("ray::")}
+
+
+def wait_gone(pids: set[int], timeout_s: float = 60.0) -> list[str]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and any(alive(pid) for pid in pids):
+        time.sleep(0.2)
+    return [cmdline(pid)[:80] for pid in pids if alive(pid)]
+
+
+@pytest.fixture(scope="session")
+def cluster():
+    """A local Ray instance with 2 CPUs and one `sitl` slot, whose nodes' $PRELAND_SITL_BINARY is NODE_SITL;
+    stopped at the end of the session, leaving no Ray process behind. Yields its GCS address."""
+    import ray  # here, not at the top: every xdist worker imports this module to collect the tests
+
+    previous = os.environ.get(SITL_ENV)
+    os.environ[SITL_ENV] = NODE_SITL  # what Ray's processes inherit: the node's environment
+    try:
+        ray.init(address="local", num_cpus=2, resources={"sitl": 1}, include_dashboard=False,
+                 logging_level=logging.WARNING, log_to_driver=False)
+    finally:
+        if previous is None:
+            os.environ.pop(SITL_ENV)
+        else:
+            os.environ[SITL_ENV] = previous
+    address = ray.get_runtime_context().gcs_address
+    yield address
+    started = ray_processes(os.getpid())
+    ray.shutdown()
+    assert started and wait_gone(started) == []
+
+
+def stored_trials(db: Path) -> int:
+    try:
+        with sqlite3.connect(db) as connection:
+            return connection.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+    except sqlite3.OperationalError:
+        return 0
+
+
+def stopped_and_said(process: subprocess.Popen) -> str:
+    """Stop `process` if it still runs; the end of what it wrote to stderr."""
+    if process.poll() is None:
+        process.terminate()
+    return process.communicate(timeout=60)[1].decode(errors="replace")[-2000:]
+
+
+def wait_stored(db: Path, count: int, process: subprocess.Popen, timeout_s: float = DRIVER_HANG_S) -> int:
+    """Wait until `db` holds `count` trials while `process` runs."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and process.poll() is None:
+        stored = stored_trials(db)
+        if stored >= count:
+            return stored
+        time.sleep(0.05)
+    running = process.poll() is None
+    said = stopped_and_said(process)
+    raise AssertionError(f"{count} trials were not stored ({stored_trials(db)} were) "
+                         f"{f'within {timeout_s:g} s' if running else 'before the driver ended'}: {said}")
+
+
+def finished(db: Path, process: subprocess.Popen, timeout_s: float = DRIVER_HANG_S) -> str:
+    """Wait until the driver `process` ends; its stderr. One that has not ended within the bound is stopped,
+    and the failure says how many trials `db` holds."""
+    try:
+        return process.communicate(timeout=timeout_s)[1].decode(errors="replace")
+    except subprocess.TimeoutExpired:
+        said = stopped_and_said(process)
+        raise AssertionError(f"the driver did not end within {timeout_s:g} s ({stored_trials(db)} trials stored): "
+                             f"{said}") from None
+
+
+def driver_process(args: list[str], **kwargs) -> subprocess.Popen:
+    """`preland campaign run ARGS --quiet` in a process of its own, not given this process's Ray address."""
+    env = {key: value for key, value in os.environ.items() if key != "RAY_ADDRESS"}
+    return subprocess.Popen([sys.executable, "-m", "preland_app.cli", "campaign", "run", *args, "--quiet"],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kwargs)
