@@ -1,4 +1,5 @@
 """The tutorials (docs/tutorials/*.md) run as a reader runs them: every shell and Python block, in page order.
+The pages that fly a vehicle run from test_docs_tutorials_vehicle.py, through `check_tutorial`.
 
 Conventions of the pages (this test is their only reader):
 
@@ -51,6 +52,12 @@ from .conftest import ROOT
 
 TUTORIALS = ROOT / "docs" / "tutorials"
 PAGES = ["index.md", "first-mission.md", "first-campaign.md", "own-land-mode.md", "sitl.md", "field-trial.md"]
+# The pages that fly a vehicle over MAVLink in wall time (a SITL, a served vehicle): test_docs_tutorials_vehicle.py
+# runs them, so that `make test` runs them on another xdist worker while this module runs the others.
+VEHICLE_PAGES = ["field-trial.md", "sitl.md"]
+# This module's pages, the longest first: xdist hands a worker its next file once at most two of its tests are
+# left, and those two should be short.
+SIMULATED_PAGES = ["own-land-mode.md", "first-campaign.md", "first-mission.md", "index.md"]
 MAX_NOT_RUN = 2
 PAGE_TIMEOUT_S = 300
 FIELD_PORT = "14550"
@@ -414,8 +421,18 @@ CHECKS = {"index.md": check_index, "first-mission.md": check_first_mission,
           "sitl.md": check_sitl, "field-trial.md": check_field_trial}
 
 
-@pytest.mark.parametrize("page", PAGES)
+def test_every_page_is_run_by_one_module():
+    assert sorted(VEHICLE_PAGES + SIMULATED_PAGES) == sorted(PAGES) == sorted(CHECKS)
+    assert sorted(path.name for path in TUTORIALS.glob("*.md")) == sorted(PAGES)
+
+
+@pytest.mark.parametrize("page", SIMULATED_PAGES)
 def test_tutorial(page, tmp_path):
+    check_tutorial(page, tmp_path)
+
+
+def check_tutorial(page: str, tmp_path: Path) -> None:
+    """Run `page` as a reader runs it, in `tmp_path`, and check what it shows and leads to."""
     text = (TUTORIALS / page).read_text()
     lines = len(text.splitlines())
     assert page == "index.md" or 60 <= lines <= 200, f"{page}: {lines} lines"
