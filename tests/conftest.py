@@ -38,15 +38,20 @@ def square_trial(thesis_mission):
     return run_trial(TrialRequest(mission=thesis_mission, seed=7))
 
 
-# The longest test files (by `pytest --durations=0`, summed per file), first. `make test` gives each xdist
-# worker whole files (--dist loadfile, --no-loadscope-reorder: in collection order, not by test count), so a
-# long file collected late runs alone at the end while the other workers idle. xdist starts each of the N
-# workers (`-n` in the Makefile) on two files, the first N and the next N in turn: the longest is paired with
-# the shortest of those. Any file not named keeps its place after these.
-LONGEST_FIRST = ("test_docs_tutorials.py", "test_campaign_ray.py", "test_field_campaign.py", "test_mavlink_camera.py",
-                 "test_mavlink_runtime.py", "test_docs_site.py", "test_calibrate.py", "test_sitl_failures.py",
-                 "test_sitl.py", "test_runtimes.py", "test_campaign_drivers.py", "test_roi_render.py",
-                 "test_campaign.py", "test_field_ops.py")
+# The longest test files (by `pytest --durations=0`, summed per file, on a loaded machine), first. `make test`
+# gives each xdist worker whole files (--dist loadfile, --no-loadscope-reorder: in this order, not by test
+# count): a long file collected late runs alone at the end while the other workers idle. xdist starts each of
+# the six workers (`-n` in the Makefile) on one of the first six files, and hands a worker the next file in
+# the order once at most two of its tests are left to run: so a file's last two tests are short ones. The
+# vehicle tutorials have two tests, so their worker takes the next file at once, to run after them: the
+# seventh is a short one. Any file not named keeps its place after these.
+FIRST_WAVE = ("test_field_campaign.py", "test_campaign_ray_drivers.py", "test_campaign_ray.py",
+              "test_mavlink_runtime.py", "test_docs_site.py", "test_docs_tutorials_vehicle.py")
+LONGEST_FIRST = FIRST_WAVE + (
+    "test_endpoint.py", "test_mavlink_camera.py", "test_docs_tutorials.py", "test_calibrate.py",
+    "test_sitl_failures.py", "test_sitl.py", "test_campaign.py", "test_roi_render.py", "test_runtimes.py",
+    "test_field_ops.py", "test_campaign_drivers.py", "test_figures.py", "test_error_budget_pinned.py",
+    "test_ground_effect.py", "test_precision_landing.py", "test_plugins.py", "test_sensing.py")
 
 
 def pytest_collection_modifyitems(session, config, items):

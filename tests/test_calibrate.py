@@ -8,7 +8,6 @@ from pathlib import Path
 
 import pytest
 import yaml
-from scipy.stats import wasserstein_distance
 from typer.testing import CliRunner
 
 from preland_app.campaign.calibrate import Flyer, run_jobs
@@ -242,6 +241,8 @@ def test_calibrate_refuses_what_it_cannot_fit_in_one_line(tmp_path):
 
 
 def test_the_report_marks_fitted_and_held_out_scenarios_and_what_the_fit_could_not_reach(tmp_path):
+    from scipy.stats import wasserstein_distance  # here: SciPy takes a second to import
+
     write(tmp_path, "tiny.yaml", TINY_MISSION)
     write(tmp_path, "field.csv", "source_table,error_cm,landing_time_s\n"
                                  "1,30,7\n1,50,7.5\n1,70,6.5\n2,20,12\n2,25,13\n2,30,14\n")
@@ -318,6 +319,8 @@ def _summary(label, errors_cm, *, published_cm):
 def test_the_fit_note_tells_a_run_inside_from_a_fit_that_could_not_reach_it(tmp_path):
     """Where the profile's own scoring trials were outside the published range, the note says whether this
     run's mean is inside anyway or still outside; where they were inside, there is no note."""
+    from scipy.stats import wasserstein_distance  # here: SciPy takes a second to import
+
     from preland_app.campaign.fidelity import fidelity_rows
 
     def score(label, *, inside, sim_mean_cm):
