@@ -204,6 +204,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         details["lockstep_wakes"] = lockstep.wakes
         details["lockstep_settles"] = lockstep.settles
         details["lockstep_settle_wall_s"] = round(lockstep.settle_wall_s, 2)
+        details["lockstep_unsettled"] = lockstep.unsettled
         details["lockstep_connected_s"] = round(connected_s, 3)
     # Sensor ticks that gave nothing because no SIM_STATE had come since the last reading.
     waits = [getattr(source, "ticks_without_new_truth", None) for source in (sensors.camera, sensors.irlock)]

@@ -60,6 +60,7 @@ from ..vehicle.lockstep_clock import MISSION_START_S, LockstepClock, udp_receive
 from ..vehicle.mavlink_backend import MavlinkVehicle
 from .base import RuntimeOptionError, TrialRequest, build_options
 from .mavlink import fly_mavlink
+from .sitl_relay import MavlinkRelay
 
 SITL_ENV = "PRELAND_SITL_BINARY"
 MAX_INSTANCES = 64
@@ -346,6 +347,7 @@ class SitlInstance:
         self.port = _free_udp_port()
         self.process: subprocess.Popen | None = None
         self.bridge: JsonBridge | None = None
+        self.relay: MavlinkRelay | None = None  # on preland's physics: between SITL and MAVSDK (sitl_relay)
         self._lock_file = None
         self._folder: tempfile.TemporaryDirectory | None = None
 
@@ -379,7 +381,7 @@ class SitlInstance:
         serial0 = _serial0_flag(binary, self.options.binary.stat().st_mtime_ns)
         return [binary, *model, "--speedup", f"{self.options.speedup:g}",
                 "--defaults", defaults, "-I", str(self.instance), f"--home={home}",
-                serial0, f"udpclient:127.0.0.1:{self.port}"]
+                serial0, f"udpclient:127.0.0.1:{self.relay.sitl_port if self.relay is not None else self.port}"]
 
     def _start_bridge(self) -> None:
         # Bound (port 0: the system picks a free one) and serving before SITL starts, so no other trial
@@ -391,6 +393,10 @@ class SitlInstance:
                                      air=self.air).start()
         except OSError as error:
             raise SitlError(f"cannot open the JSON physics port: {error.strerror or error}") from None
+        try:
+            self.relay = MavlinkRelay(mavsdk_port=self.port).start()
+        except OSError as error:
+            raise SitlError(f"cannot open the MAVLink relay's ports: {error.strerror or error}") from None
 
     async def __aenter__(self) -> "SitlInstance":
         self.instance = self._claim_instance()
@@ -470,6 +476,8 @@ class SitlInstance:
     def _release(self) -> None:
         if self.bridge is not None:
             self.bridge.stop()  # joins its thread (bounded); safe to call again
+        if self.relay is not None:
+            self.relay.stop()
         if self._lock_file is not None:
             self._lock_file.close()
             self._lock_file = None
@@ -519,8 +527,8 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
         tlog_path = None
         if options.tlog_dir is not None:
             tlog_path = str(Path(options.tlog_dir) / (tlog_name or f"{mission.name}_seed{request.seed}.tlog"))
-        lockstep = LockstepClock(gate=sitl.bridge.gate, unread=functools.partial(udp_receive_queue, sitl.port)) \
-            if sitl.bridge is not None else None
+        lockstep = LockstepClock(gate=sitl.bridge.gate, unread=functools.partial(udp_receive_queue, sitl.port),
+                                 relay=sitl.relay) if sitl.bridge is not None else None
         # In lock-step the GPS error moves on from the mission's start, which is at the same vehicle time
         # in every trial, so SITL's GPS is the same whenever the companion connected.
         start_s = MISSION_START_S if lockstep is not None else 0.0

@@ -19,10 +19,13 @@ paced clock's (`paced_clock`) as far as SITL allows:
 
 Before the sleepers due at a hold wake, the companion takes in what SITL sent before it stopped there:
 first SITL finishes its loop (it writes out what the loop sent, then asks for the next step: the physics
-then waits at the hold), then the bytes in this machine's socket are read (`unread`), then the messages
-are taken in (`activity`, set by the vehicle: its count of messages received and calls returned; the
-sleepers wake once it has not changed for SETTLE_WALL_S). So what a task reads at a vehicle time does not
-depend on how fast this machine moved the messages along.
+then waits at the hold), then the messages are taken in. With a relay between SITL and MAVSDK
+(`runtime.sitl_relay`), the vehicle has then read as many of each message it uses (TAKEN_IN, `listened`,
+set by the vehicle) as the relay passed on, and a message handed to MAVSDK counts as sent once the relay
+has passed it to SITL (`handing`). Without one, the bytes in this machine's socket are read (`unread`),
+then the sleepers wake once `activity` (set by the vehicle: its count of messages received and calls
+returned) has not changed for SETTLE_WALL_S; the relay's counts start after such a wake. So what a task
+reads at a vehicle time does not depend on how fast this machine moved the messages along.
 
 A physics whose time stops while nothing holds it (SITL stopped or hung: it sends no servo packet) is
 found by a wall bound: LinkLost after `stall_wall_s`.
@@ -31,16 +34,21 @@ found by a wall bound: LinkLost after `stall_wall_s`.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import heapq
 import itertools
 import math
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ..errors import LinkLost, WaitTimeout
 from ..sim.step_gate import REACHED_S, StepGate
 from .after_ready import AfterReady
+
+if TYPE_CHECKING:
+    from ..runtime.sitl_relay import MavlinkRelay
 
 # Wall seconds without the physics' time moving, while nothing here holds it, before the link counts as
 # lost: far more than a loaded machine's stall, well inside a test's patience.
@@ -61,6 +69,14 @@ SETTLE_MAX_WALL_S = 0.05
 DELIVERY_WALL_S = 0.001
 # The same for a request that waits for an answer: MAVSDK sends it from a thread started for the call.
 EXCHANGE_DELIVERY_WALL_S = 0.005
+# With a relay between SITL and MAVSDK (`runtime.sitl_relay`), a wake waits until the vehicle has taken in as
+# many of SITL's messages as the relay passed on, and a message handed to MAVSDK until the relay has passed it
+# to SITL, each within this bound (wall s; then it goes on, and counts the wake unsettled).
+RELAYED_MAX_WALL_S = 2.0
+# The messages a wake counts: those the vehicle reads (MAVSDK passes on only the messages it knows).
+TAKEN_IN = frozenset({"HEARTBEAT", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "EXTENDED_SYS_STATE",
+                      "SYS_STATUS", "GPS_RAW_INT", "HOME_POSITION", "DISTANCE_SENSOR", "COMMAND_ACK",
+                      "PARAM_VALUE", "STATUSTEXT"})
 # How long SITL may take to finish its loop and ask for the next step before a wake goes on without it
 # (wall s; far more than the loop takes, short enough for a hold the physics never reaches).
 SITL_LOOP_MAX_WALL_S = 0.5
@@ -70,7 +86,7 @@ class LockstepClock:
     """Vehicle seconds of the physics behind `gate`; see the module for the rules."""
 
     def __init__(self, *, gate: StepGate, stall_wall_s: float = PHYSICS_STALL_WALL_S,
-                 unread: Callable[[], int] | None = None) -> None:
+                 unread: Callable[[], int] | None = None, relay: MavlinkRelay | None = None) -> None:
         if stall_wall_s <= 0:
             raise ValueError("stall_wall_s must be positive")
         self._gate = gate
@@ -86,6 +102,11 @@ class LockstepClock:
         self._undelivered: list[Callable[[], bool]] = []  # of the exchanges running: has SITL its request?
         self._sending = 0  # messages just handed to MAVSDK, given DELIVERY_WALL_S to leave
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
+        self._relay = relay
+        self.listened: collections.Counter[str] | None = None  # the vehicle's messages taken in, by name
+        self._handed: collections.Counter[str] = collections.Counter()  # to MAVSDK, by the relay's key
+        self._forgiven: collections.Counter[str] = collections.Counter()  # relayed, never taken in
+        self._reconciled = False  # the counts above compared once after a quiet wake (see _settle_then_wake)
         self._settling = False
         self.waiting_for_sitl = False  # a wake waits for SITL to finish its loop and ask for the next step
         self.unsettled = 0  # wakes that went on before SITL asked for its next step or its messages stopped
@@ -173,19 +194,34 @@ class LockstepClock:
         """An exchange that needs no answer (a LANDING_TARGET sent): the physics keeps holding for it."""
         yield
 
-    async def sent(self) -> None:
+    def handing(self, key: str) -> Callable[[], bool] | None:
+        """Before a message is handed to MAVSDK: whether it has reached SITL's socket, by the relay's count
+        of `key` (see `runtime.sitl_relay`); None without a relay."""
+        if self._relay is None:
+            return None
+        self._handed[key] += 1
+        wanted, relayed = self._handed[key], self._relay.to_sitl
+        return lambda: relayed[key] >= wanted
+
+    async def sent(self, delivered: Callable[[], bool] | None = None) -> None:
         """The running task has just handed a message to MAVSDK, which sends it from a thread of its own:
-        time stands for DELIVERY_WALL_S, so the message is in SITL's socket before SITL's next step."""
+        time stands until `delivered()` (from `handing`), else for DELIVERY_WALL_S, so the message is in
+        SITL's socket before SITL's next step."""
         self._sending += 1
         self._update()
         try:
-            await asyncio.sleep(DELIVERY_WALL_S)
+            if delivered is None:
+                await asyncio.sleep(DELIVERY_WALL_S)
+            else:
+                deadline_wall_s = time.monotonic() + RELAYED_MAX_WALL_S
+                while not delivered() and time.monotonic() < deadline_wall_s:
+                    await asyncio.sleep(SETTLE_WALL_S)
         finally:
             self._sending -= 1
             self._update()
 
     @contextlib.contextmanager
-    def exchanging(self, answered: Callable[[], bool] | None = None):
+    def exchanging(self, answered: Callable[[], bool] | None = None, *, sends: str | None = None):
         """The running task waits for the vehicle's answer, which SITL gives only while time passes. Time
         stands for EXCHANGE_DELIVERY_WALL_S first (MAVSDK sends the request from a thread of its own, and it
         must be in SITL's socket before SITL's next step), then runs in EXCHANGE_STEP_S steps, and a sensor
@@ -198,8 +234,11 @@ class LockstepClock:
             self._asleep[task] = math.inf
         self._exchanges += 1
         entered_wall_s = time.monotonic()
+        relayed = self.handing(sends) if sends is not None else None
 
-        def delivered() -> bool:
+        def delivered() -> bool:  # by the relay's count of `sends` (the request), else by wall time
+            if relayed is not None and time.monotonic() - entered_wall_s < RELAYED_MAX_WALL_S:
+                return relayed()
             return time.monotonic() - entered_wall_s >= EXCHANGE_DELIVERY_WALL_S
 
         self._undelivered.append(delivered)
@@ -280,6 +319,9 @@ class LockstepClock:
                     break
                 await asyncio.sleep(SETTLE_WALL_S)
             self.waiting_for_sitl = False
+            if self._relay is not None and self.listened is not None and self._reconciled:
+                await self._take_in_relayed()
+                return
             deadline_wall_s = time.monotonic() + SETTLE_MAX_WALL_S
             while self._unread is not None and self._unread() > 0 and time.monotonic() < deadline_wall_s:
                 await asyncio.sleep(0)
@@ -293,11 +335,36 @@ class LockstepClock:
                 if time.monotonic() > deadline_wall_s:
                     self.unsettled += 1
                     break
+            if self._relay is not None and self.listened is not None:
+                # What SITL sent before MAVSDK listened, or before the vehicle read MAVSDK's stream, was never
+                # taken in: counted from here on, each message is.
+                relayed, listened = self._relay.from_sitl, self.listened
+                self._forgiven = collections.Counter({name: relayed[name] - listened[name] for name in TAKEN_IN
+                                                      if relayed[name] > listened[name]})
+                self._reconciled = True
         finally:
             self._settling = False
             self.settles += 1
             self.settle_wall_s += time.monotonic() - started_wall_s
             self._wake_sleepers()
+
+    async def _take_in_relayed(self) -> None:
+        """Wait until the relay has passed on all SITL sent and the vehicle has taken in as many of each
+        message it reads as the relay passed on; one never taken in within the bound is forgiven after."""
+        deadline_wall_s = time.monotonic() + RELAYED_MAX_WALL_S
+        while True:
+            behind = {} if self._relay.idle() else {"(relay)": 1}
+            if not behind:
+                relayed, listened = self._relay.from_sitl, self.listened
+                behind = {name: relayed[name] - self._forgiven[name] - listened[name] for name in TAKEN_IN
+                          if relayed[name] - self._forgiven[name] > listened[name]}
+            if not behind:
+                return
+            if time.monotonic() > deadline_wall_s:
+                self.unsettled += 1
+                self._forgiven.update({name: count for name, count in behind.items() if name in TAKEN_IN})
+                return
+            await asyncio.sleep(SETTLE_WALL_S)
 
     def _wake_sleepers(self) -> None:
         now_s = self.now_s()

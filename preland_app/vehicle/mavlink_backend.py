@@ -21,6 +21,7 @@ NED positions are relative to home (HOME_POSITION's x, y, z from the origin).
 from __future__ import annotations
 
 import asyncio
+import collections
 import concurrent.futures
 import contextlib
 import json
@@ -235,9 +236,11 @@ class MavlinkVehicle:
         self.paced = paced
         self._paced_clock = PacedClock(grant=self._want_grant) if paced else None
         self._lockstep = lockstep
+        self._listened: collections.Counter[str] = collections.Counter()  # messages read, by name
         self._received = 0  # messages taken in
         if lockstep is not None:
             lockstep.activity = self._activity
+            lockstep.listened = self._listened
         self._pace_wanted_ms: int | None = None
         self._pace_changed = asyncio.Event()
         self._last_heartbeat_vehicle_s = 0.0
@@ -383,6 +386,7 @@ class MavlinkVehicle:
                 continue
             name = message.message_name
             self._received += 1
+            self._listened[name] += 1
             if self.tlog is not None:
                 self.tlog.write(name=name, fields=fields, system_id=message.system_id,
                                 component_id=message.component_id)
@@ -531,13 +535,13 @@ class MavlinkVehicle:
         """Paced, the vehicle's time stands still during an exchange with it (as in virtual time)."""
         return self._paced_clock.holding() if self._paced_clock is not None else contextlib.nullcontext()
 
-    def _exchanging(self, answered: Callable[[], bool] | None = None):
+    def _exchanging(self, answered: Callable[[], bool] | None = None, *, sends: str | None = None):
         """An exchange that waits for the vehicle's answer: paced, time stands still (the simulator answers
         while it holds); in lock-step with SITL, time runs for it (SITL answers only as time passes) from
         when SITL has the request until `answered()`, the answer read off the link."""
         if self._lockstep is None:
             return self._holding()
-        return self._lockstep.exchanging(answered=answered)
+        return self._lockstep.exchanging(answered=answered, sends=sends)
 
     async def _send(self, name: str, fields: dict[str, Any], *, targeted: bool = True) -> None:
         with self._holding():
@@ -547,16 +551,18 @@ class MavlinkVehicle:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         payload = {"target_system": self.system_id, "target_component": 1, **fields} if targeted else dict(fields)
+        delivered = self._lockstep.handing(name) if self._lockstep is not None else None
         self._sender.send_message(MavlinkMessage(message_name=name, target_system_id=self.system_id,
                                                  target_component_id=1, fields_json=json.dumps(payload)))
         if self._lockstep is not None:
-            await self._lockstep.sent()
+            await self._lockstep.sent(delivered)
 
     async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
         """Send COMMAND_LONG and await its COMMAND_ACK: which ACK of `command` it was on this link (1, 2, ...),
         or None without one (`check=False`)."""
         acks_before = self._final_acks_read.get(command, 0)
-        with self._exchanging(answered=lambda: self._final_acks_read.get(command, 0) > acks_before):
+        with self._exchanging(answered=lambda: self._final_acks_read.get(command, 0) > acks_before,
+                              sends=f"COMMAND_LONG:{command}"):
             return await self._command_now(command, *params, operation=operation, check=check)
 
     async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
