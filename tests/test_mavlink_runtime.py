@@ -155,6 +155,15 @@ def test_a_physics_beside_the_companion_is_the_truth_the_landing_is_scored_by(th
     assert outcome.landing_error_cm == pytest.approx(expected_cm, abs=1e-6)
 
 
+def _fly_irlock_paced_then_stop(served, mission, *, seed: int):
+    """One IR-LOCK trial of `mission` paced against `served`, which is stopped after it."""
+    try:
+        return asyncio.run(fly_mavlink(TrialRequest(mission=mission, seed=seed, land_mode="irlock"), url=served.url,
+                                       paced=True))
+    finally:
+        served.stop()
+
+
 def test_a_stalled_truth_stream_blinds_the_sensors_instead_of_showing_old_views(short_mission):
     # SIM_STATE stops for 2.5 vehicle s, half a second into LAND, while the rest of the telemetry goes on (a
     # stalled link or process). Readings of the last pose stamped with the present had the autopilot chase a
@@ -173,11 +182,7 @@ def test_a_stalled_truth_stream_blinds_the_sensors_instead_of_showing_old_views(
         send_sim_state()
 
     served.face._send_sim_state = stalled_sim_state
-    try:
-        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=short_mission, seed=4, land_mode="irlock"),
-                                          url=served.url, paced=True))
-    finally:
-        served.stop()
+    outcome = _fly_irlock_paced_then_stop(served, short_mission, seed=4)
     assert stall["skipped"] >= 40  # SIM_STATE at 50 Hz for 2.5 s: about 125
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert outcome.landing_error_cm < 15.0
@@ -361,10 +366,6 @@ def test_a_paced_command_answered_late_in_wall_time_reaches_the_vehicle_once(sho
         handle(message)
 
     served.face._on_command_long = answering_the_first_mode_change_late
-    try:
-        outcome = asyncio.run(fly_mavlink(TrialRequest(mission=short_mission, seed=3, land_mode="irlock"),
-                                          url=served.url, paced=True))
-    finally:
-        served.stop()
+    outcome = _fly_irlock_paced_then_stop(served, short_mission, seed=3)
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert modes_received == [FlightMode.GUIDED, FlightMode.LAND]
