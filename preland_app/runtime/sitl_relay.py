@@ -16,6 +16,8 @@ import socket
 import struct
 import threading
 
+from ..mavlink.dialect import MAGIC_V2
+
 _POLL_WALL_S = 0.2  # how often the relay's thread looks whether it is to stop (wall s)
 _COMMAND_LONG = 76
 _COMMAND_OFFSET = 28  # of `command` (uint16) in COMMAND_LONG's payload, after its seven floats
@@ -32,7 +34,7 @@ def frame_keys(data: bytes, names: dict[int, str]) -> list[str]:
     keys, index = [], 0
     while index + 8 <= len(data):
         magic, length = data[index], data[index + 1]
-        if magic == 0xFD:  # MAVLink 2: incompat, compat, seq, sysid, compid, 3-byte id; 13 more bytes if signed
+        if magic == MAGIC_V2:  # MAVLink 2: incompat, compat, seq, sysid, compid, 3-byte id; 13 more bytes if signed
             message_id = data[index + 7] | data[index + 8] << 8 | data[index + 9] << 16
             payload, end = index + 10, index + 12 + length + (13 if data[index + 2] & 1 else 0)
         elif magic == 0xFE:  # MAVLink 1: seq, sysid, compid, 1-byte id

@@ -20,8 +20,8 @@ paced clock's (`paced_clock`) as far as SITL allows:
 Before the sleepers due at a hold wake, the companion takes in what SITL sent before it stopped there:
 first SITL finishes its loop (it writes out what the loop sent, then asks for the next step: the physics
 then waits at the hold), then the messages are taken in. With a relay between SITL and MAVSDK
-(`runtime.sitl_relay`), the vehicle has then read as many of each message it uses (TAKEN_IN, `listened`,
-set by the vehicle) as the relay passed on, and a message handed to MAVSDK counts as sent once the relay
+(`runtime.sitl_relay`), the vehicle has then read as many of each message it uses (`taken_in` and
+`listened`, set by the vehicle) as the relay passed on, and a message handed to MAVSDK counts as sent once the relay
 has passed it to SITL (`handing`). Without one, the bytes in this machine's socket are read (`unread`),
 then the sleepers wake once `activity` (set by the vehicle: its count of messages received and calls
 returned) has not changed for SETTLE_WALL_S; the relay's counts start after such a wake. So what a task
@@ -73,10 +73,6 @@ EXCHANGE_DELIVERY_WALL_S = 0.005
 # many of SITL's messages as the relay passed on, and a message handed to MAVSDK until the relay has passed it
 # to SITL, each within this bound (wall s; then it goes on, and counts the wake unsettled).
 RELAYED_MAX_WALL_S = 2.0
-# The messages a wake counts: those the vehicle reads (MAVSDK passes on only the messages it knows).
-TAKEN_IN = frozenset({"HEARTBEAT", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE", "EXTENDED_SYS_STATE",
-                      "SYS_STATUS", "GPS_RAW_INT", "HOME_POSITION", "DISTANCE_SENSOR", "COMMAND_ACK",
-                      "PARAM_VALUE", "STATUSTEXT"})
 # How long SITL may take to finish its loop and ask for the next step before a wake goes on without it
 # (wall s; far more than the loop takes, short enough for a hold the physics never reaches).
 SITL_LOOP_MAX_WALL_S = 0.5
@@ -104,6 +100,7 @@ class LockstepClock:
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
         self._relay = relay
         self.listened: collections.Counter[str] | None = None  # the vehicle's messages taken in, by name
+        self.taken_in: frozenset[str] = frozenset()  # the names a wake counts (MAVSDK passes on those it knows)
         self._handed: collections.Counter[str] = collections.Counter()  # to MAVSDK, by the relay's key
         self._forgiven: collections.Counter[str] = collections.Counter()  # relayed, never taken in
         self._reconciled = False  # the counts above compared once after a quiet wake (see _settle_then_wake)
@@ -339,7 +336,7 @@ class LockstepClock:
                 # What SITL sent before MAVSDK listened, or before the vehicle read MAVSDK's stream, was never
                 # taken in: counted from here on, each message is.
                 relayed, listened = self._relay.from_sitl, self.listened
-                self._forgiven = collections.Counter({name: relayed[name] - listened[name] for name in TAKEN_IN
+                self._forgiven = collections.Counter({name: relayed[name] - listened[name] for name in self.taken_in
                                                       if relayed[name] > listened[name]})
                 self._reconciled = True
         finally:
@@ -356,13 +353,13 @@ class LockstepClock:
             behind = {} if self._relay.idle() else {"(relay)": 1}
             if not behind:
                 relayed, listened = self._relay.from_sitl, self.listened
-                behind = {name: relayed[name] - self._forgiven[name] - listened[name] for name in TAKEN_IN
+                behind = {name: relayed[name] - self._forgiven[name] - listened[name] for name in self.taken_in
                           if relayed[name] - self._forgiven[name] > listened[name]}
             if not behind:
                 return
             if time.monotonic() > deadline_wall_s:
                 self.unsettled += 1
-                self._forgiven.update({name: count for name, count in behind.items() if name in TAKEN_IN})
+                self._forgiven.update({name: count for name, count in behind.items() if name in self.taken_in})
                 return
             await asyncio.sleep(SETTLE_WALL_S)
 

@@ -69,6 +69,9 @@ _LANDED = {0: LandedState.UNDEFINED, 1: LandedState.ON_GROUND, 2: LandedState.IN
            4: LandedState.LANDING}
 STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 10, "ATTITUDE": 10, "EXTENDED_SYS_STATE": 5,
               "SYS_STATUS": 2, "GPS_RAW_INT": 2, "HOME_POSITION": 1, "DISTANCE_SENSOR": 10}
+# What the vehicle reads of what the autopilot sends: its streams and the answers to requests (a lock-step clock
+# counts these before a wake).
+READ_MESSAGES = frozenset(STREAMS_HZ) | {"COMMAND_ACK", "PARAM_VALUE", "STATUSTEXT"}
 # HEARTBEAT arrives on MAVSDK's message stream, COMMAND_ACK on the command call's own: a HEARTBEAT sent
 # before an accepted mode change or arm/disarm can reach preland after that command's ACK (a backlog of the
 # message stream on a loaded machine holds seconds of vehicle time at 20x). The message stream carries the
@@ -240,7 +243,7 @@ class MavlinkVehicle:
         self._received = 0  # messages taken in
         if lockstep is not None:
             lockstep.activity = self._activity
-            lockstep.listened = self._listened
+            lockstep.listened, lockstep.taken_in = self._listened, READ_MESSAGES
         self._pace_wanted_ms: int | None = None
         self._pace_changed = asyncio.Event()
         self._last_heartbeat_vehicle_s = 0.0
