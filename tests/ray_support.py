@@ -67,10 +67,11 @@ def wait_gone(pids: set[int], timeout_s: float = 60.0) -> list[str]:
     return [cmdline(pid)[:80] for pid in pids if alive(pid)]
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def cluster():
     """A local Ray instance with 2 CPUs and one `sitl` slot, whose nodes' $PRELAND_SITL_BINARY is NODE_SITL;
-    stopped at the end of the session, leaving no Ray process behind. Yields its GCS address."""
+    stopped after the module's last test (its daemons and idle workers would otherwise take CPU from the
+    tests that follow on that worker), leaving no Ray process behind. Yields its GCS address."""
     import ray  # here, not at the top: every xdist worker imports this module to collect the tests
 
     previous = os.environ.get(SITL_ENV)

@@ -3,7 +3,6 @@
 from PIL import Image
 from typer.testing import CliRunner
 
-from preland_app.campaign.figures import _zoom_radius_cm, scenario_colors, spans_two_orders
 from preland_app.campaign.report import summarize
 from preland_app.campaign.store import ResultsStore
 from preland_app.cli import app
@@ -53,6 +52,8 @@ def test_legends_say_what_every_mark_means_and_errors_over_two_orders_get_a_log_
     positions = (tmp_path / "svg" / "thesis_table3_positions.svg").read_text()
     assert "filled circle: simulated" in positions and "hollow diamond: published" in positions
     assert "within" in positions  # the zoomed panel beside the full one
+    from preland_app.campaign.figures import _zoom_radius_cm, spans_two_orders  # matplotlib: not at collection
+
     assert spans_two_orders([1.0, 100.0]) and not spans_two_orders([1.0, 99.0]) and not spans_two_orders([0.0, 5])
     assert _zoom_radius_cm([1.0, 2.0, 3.0, 4.0, 150.0]) == 5 and _zoom_radius_cm([20.0, 40.0]) is None
 
@@ -73,6 +74,8 @@ def test_field_rows_keep_their_scenarios_colour_and_scenarios_stay_distinct(tmp_
                                    "--error-cm", "5"]).exit_code == 0
     with ResultsStore(db) as store:
         summaries = summarize(store, "thesis_table3")
+    from preland_app.campaign.figures import scenario_colors  # matplotlib: not at collection
+
     colors = scenario_colors(summaries)
     assert len(summaries) == 4 and len(colors) == 2 and len(set(colors.values())) == 2
     many = [type("S", (), {"scenario": f"s{i}", "label": f"s{i}"})() for i in range(15)]
