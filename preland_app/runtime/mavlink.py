@@ -103,7 +103,10 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
         await _stop(side_tasks)
         await vehicle.close()
         raise
-    connected_s = await lockstep.start_at() if lockstep is not None else None
+    connected_s = None
+    if lockstep is not None:
+        connected_s = await lockstep.start_at()
+        await vehicle.restart_streams()  # on a schedule from the mission's start, the same in every trial
     truth_source = None
     if truth:
         truth_source = SimStateTruth(vehicle)

@@ -373,10 +373,19 @@ class MavlinkVehicle:
             except TimeoutError:
                 pass
 
-    async def _request_streams(self) -> None:
+    async def restart_streams(self) -> None:
+        """Stop every stream, then ask for each again. ArduPilot sets a stream's schedule when its interval is
+        first set (GCS_MAVLINK::set_ap_message_interval), so its messages then come at vehicle times counted
+        from now, not from when the connection's requests happened to arrive."""
+        await self._request_streams(restart=True)
+
+    async def _request_streams(self, *, restart: bool = False) -> None:
         streams = dict(STREAMS_HZ)
         if self.want_truth and not self.paced:  # paced: the simulator sends SIM_STATE with each held time
             streams["SIM_STATE"] = SIM_STATE_HZ
+        for name in streams if restart else ():  # all stopped first: a stream sharing a schedule keeps it
+            await self._command(MAV_CMD_SET_MESSAGE_INTERVAL, MESSAGE_IDS[name], -1, operation="set_message_interval",
+                                check=False)
         for name, rate_hz in streams.items():
             await self._command(MAV_CMD_SET_MESSAGE_INTERVAL, MESSAGE_IDS[name], 1e6 / rate_hz,
                                 operation="set_message_interval", check=False)
@@ -563,7 +572,9 @@ class MavlinkVehicle:
     async def _command(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
         """Send COMMAND_LONG and await its COMMAND_ACK: which ACK of `command` it was on this link (1, 2, ...),
         or None without one (`check=False`)."""
-        acks_before = self._final_acks_read.get(command, 0)
+        # The stream's ACKs can come after the calls' own: an earlier call of `command` returned already, its
+        # ACK not yet read on the stream, must not pass for this call's answer.
+        acks_before = max(self._final_acks_read.get(command, 0), self._acks_returned.get(command, 0))
         with self._exchanging(answered=lambda: self._final_acks_read.get(command, 0) > acks_before,
                               sends=f"COMMAND_LONG:{command}"):
             return await self._command_now(command, *params, operation=operation, check=check)
