@@ -21,13 +21,16 @@ campaign: $(STAMP)
 fly: $(STAMP)
 	$(VENV)/bin/preland fly missions/thesis_square_land.yaml
 
-# Each test module on one worker (--dist loadfile): the Ray tests then share one local Ray instance. The
+# Each test module on one worker (--dist loadfile): a module's Ray tests share its one local Ray instance. The
 # modules go out in collection order (--no-loadscope-reorder), which puts the longest first (tests/conftest.py).
 # Six workers on a 2-core machine: many tests wait in wall time (Ray starting and stopping, the SITL stand-in
 # flying at its speed-up, a lost link's bound), and the extra workers keep both cores busy meanwhile.
 # The suite starts hundreds of Python processes (campaign workers, CLI runs, tutorials): with bytecode written
 # (PYTHONDONTWRITEBYTECODE emptied, where the environment sets it), each module is compiled once, not in each.
+# Collecting once first writes the test modules' compiled (assertion-rewritten) code and preland's bytecode, which
+# the six workers then read: on a fresh checkout each worker would otherwise compile them all at once.
 test: $(STAMP)
+	PYTHONDONTWRITEBYTECODE= $(VENV)/bin/python -m pytest -q --collect-only -p no:cacheprovider >/dev/null || true
 	PYTHONDONTWRITEBYTECODE= $(VENV)/bin/python -m pytest -q -n 6 --dist loadfile --no-loadscope-reorder
 
 # Builds the docs site into site/ (strict: a broken link or a missing page fails).
