@@ -287,7 +287,7 @@ def test_parameters_are_read_and_written_with_ardupilots_types(thesis_mission):
 def test_urls_reach_mavsdk_in_its_own_spelling():
     """ArduPilot documents SITL and telemetry servers as tcp://host:port; MAVSDK 3 deprecates that spelling
     for tcpout://."""
-    from preland_app.vehicle.mavlink_backend import mavsdk_connection_url
+    from preland_app.vehicle.mavsdk_support import mavsdk_connection_url
 
     assert mavsdk_connection_url("tcp://127.0.0.1:5760") == "tcpout://127.0.0.1:5760"
     assert mavsdk_connection_url("udp://:14550") == "udpin://0.0.0.0:14550"  # MAVSDK 3 deprecates udp://
@@ -305,7 +305,7 @@ def test_a_mavsdk_call_that_never_returns_does_not_hold_the_trial_at_its_end():
     import threading
     import time
 
-    from preland_app.vehicle.mavlink_backend import DaemonCallExecutor
+    from preland_app.vehicle.mavsdk_support import DaemonCallExecutor
 
     never = threading.Event()
 
