@@ -128,3 +128,41 @@ def test_a_sensor_task_that_waits_for_something_else_is_named_when_time_cannot_p
 
     with pytest.raises(WaitTimeout, match="camera-reader hold the vehicle's time"):
         run(main)
+
+
+def test_a_failed_link_ends_every_sleep_at_once_naming_it():
+    sim = Simulator()
+    sim.clock.answer_timeout_wall_s = 600.0  # the wall bound must not be what ends the sleeps
+    ended = []
+
+    async def sleeper(duration_s):
+        try:
+            await sim.clock.sleep(duration_s)
+        except LinkLost as error:
+            ended.append(str(error))
+
+    async def main():
+        sim.clock.start(1.0)
+        await asyncio.sleep(0)
+        sim.grant = lambda time_ms: None  # the simulator stops answering: both sleepers stay asleep
+        sim.clock._grant = sim.grant
+        sleepers = [asyncio.ensure_future(sleeper(d)) for d in (0.5, 2.0)]
+        await asyncio.sleep(0)
+        sim.clock.fail(operation="mavlink-listen", reason="mavlink-listen stopped: RuntimeError: boom")
+        await asyncio.gather(*sleepers)
+        await sleeper(0.1)  # and a sleep begun afterwards
+
+    run(main)
+    assert ended == ["mavlink-listen: mavlink-listen stopped: RuntimeError: boom"] * 3
+
+
+def test_an_unanswered_grant_is_reported_with_what_the_sender_knows():
+    clock = PacedClock(grant=lambda time_ms: None, answer_timeout_wall_s=0.2,
+                       explain=lambda: "that grant sent 3 times")
+
+    async def main():
+        clock.start(1.0)
+        await clock.sleep(0.1)
+
+    with pytest.raises(LinkLost, match=r"held at 1000 ms, granted 1100 ms; that grant sent 3 times"):
+        run(main)

@@ -170,7 +170,7 @@ class MavlinkVehicle:
         self.want_truth = want_truth
         self._clock = VehicleTimeClock()
         self.paced = paced
-        self._paced_clock = PacedClock(grant=self._want_grant) if paced else None
+        self._paced_clock = PacedClock(grant=self._want_grant, explain=self._pace_sends) if paced else None
         self._lockstep = lockstep
         self._listened: collections.Counter[str] = collections.Counter()  # messages read, by name
         self._received = 0  # messages taken in
@@ -179,6 +179,10 @@ class MavlinkVehicle:
             lockstep.listened, lockstep.taken_in = self._listened, READ_MESSAGES
         self._pace_wanted_ms: int | None = None
         self._pace_changed = asyncio.Event()
+        self._pace_sent = 0  # how many times the newest PRELAND_PACE grant was sent
+        self._pace_send_failures = 0  # of those, sends MAVSDK refused
+        self._pace_send_error = ""  # the last refusal
+        self._failure: LinkLost | None = None  # a task that reads or writes the link stopped (see `_background`)
         self._last_heartbeat_vehicle_s = 0.0
         self._messages: dict[str, dict[str, Any]] = {}
         self._sim_state_time_s = 0.0
@@ -255,8 +259,8 @@ class MavlinkVehicle:
         # message and returns (no answer is awaited), where the wrapper starts a thread for each (a
         # LANDING_TARGET and a PRELAND_PACE grant every few vehicle ms). The ctypes call releases the GIL.
         self._sender = self._direct._plugin
-        self._tasks.append(asyncio.ensure_future(self._listen()))
-        self._tasks.append(asyncio.ensure_future(self._tick()))
+        self._background(self._listen(), "listen")
+        self._background(self._tick(), "tick")
         deadline = time.monotonic() + self.connect_timeout_s
         # Paced, the simulator may hold at time 0 (sim serve --paced): its HEARTBEAT is enough.
         while not (self._clock.settled or self.paced) or "HEARTBEAT" not in self._messages:
@@ -274,7 +278,7 @@ class MavlinkVehicle:
             await self._direct.load_custom_xml(xml_text())
         except Exception as error:
             raise VehicleError(operation="connect", reason=f"MAVSDK cannot load preland's dialect: {error}") from None
-        self._tasks.append(asyncio.ensure_future(self._pace_sender()))
+        self._background(self._pace_sender(), "pace")
         self._paced_clock.start(self._clock.now_s())
         deadline = time.monotonic() + PACE_FIRST_ANSWER_WALL_S
         while not self._paced_clock.answers:
@@ -284,6 +288,28 @@ class MavlinkVehicle:
                                                                "preland's simulator (preland sim serve)")
             await asyncio.sleep(0.01)
 
+    def _background(self, coroutine, name: str) -> None:
+        """A task that runs as long as the link. One that stops on an error takes the link with it, named:
+        silently gone, it would leave the trial waiting for answers nobody reads or grants nobody sends."""
+        task = asyncio.ensure_future(coroutine)
+        task.set_name(f"mavlink-{name}")
+        task.add_done_callback(self._background_done)
+        self._tasks.append(task)
+
+    def _background_done(self, task: asyncio.Task) -> None:
+        if task.cancelled() or self._closed:
+            return
+        error = task.exception()
+        reason = f"{task.get_name()} stopped: {type(error).__name__}: {error}" if error else \
+            f"{task.get_name()} ended"
+        self._failure = LinkLost(operation=task.get_name(), reason=reason)
+        if self._paced_clock is not None:
+            self._paced_clock.fail(operation=task.get_name(), reason=reason)
+
+    def _pace_sends(self) -> str:
+        failed = f", {self._pace_send_failures} failed ({self._pace_send_error})" if self._pace_send_failures else ""
+        return f"that grant sent {self._pace_sent} times{failed}"
+
     def _want_grant(self, time_ms: int) -> None:
         """PacedClock's grant: the sender task sends the newest, one at a time, so grants leave in order."""
         self._pace_wanted_ms = time_ms
@@ -291,14 +317,24 @@ class MavlinkVehicle:
 
     async def _pace_sender(self) -> None:
         clock = self._paced_clock
-        sent_ms, sent_wall_s, answers_then = None, 0.0, 0
+        sent_ms, sent_wall_s = None, 0.0
         while True:
             wanted_ms = self._pace_wanted_ms
-            unanswered = clock.answers == answers_then
+            # Unanswered until the simulator says it holds at or past the grant. Any answer is not enough: one
+            # to an earlier grant, or a second answer to a grant sent twice, can come after this grant has
+            # left, and this grant's own answer may be lost.
+            unanswered = bool(sent_ms) and round(clock.now_s() * 1000) < sent_ms
             if wanted_ms is not None and (wanted_ms != sent_ms or (
                     unanswered and time.monotonic() - sent_wall_s > PACE_RESEND_WALL_S)):
-                sent_ms, sent_wall_s, answers_then = wanted_ms, time.monotonic(), clock.answers
-                await self._send_now("PRELAND_PACE", {"time_boot_ms": wanted_ms})
+                if wanted_ms != sent_ms:
+                    self._pace_sent = self._pace_send_failures = 0
+                sent_ms, sent_wall_s = wanted_ms, time.monotonic()
+                self._pace_sent += 1
+                try:
+                    await self._send_now("PRELAND_PACE", {"time_boot_ms": wanted_ms})
+                except Exception as error:  # MAVSDK could not send it now: sent again after PACE_RESEND_WALL_S
+                    self._pace_send_failures += 1
+                    self._pace_send_error = f"{type(error).__name__}: {error}"
                 continue
             self._pace_changed.clear()
             try:
@@ -390,6 +426,8 @@ class MavlinkVehicle:
     def _check_link(self, operation: str) -> None:
         if self._closed or self._direct is None:
             raise VehicleError(operation=operation, reason="not connected")
+        if self._failure is not None:
+            raise LinkLost(operation=operation, reason=self._failure.reason)
         locked = self._lockstep or (self._paced_clock if self._paced_clock is not None and
                                     self._paced_clock.started else None)
         if locked is not None:

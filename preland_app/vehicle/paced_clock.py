@@ -44,9 +44,12 @@ class PacedClock:
     """Vehicle seconds, advanced by the simulator's PRELAND_PACE answers. `grant(time_ms)` sends a
     PRELAND_PACE grant (0 releases the simulator); it must not block, and grants must leave in order."""
 
-    def __init__(self, *, grant: Callable[[int], None], answer_timeout_wall_s: float = PACE_ANSWER_WALL_S) -> None:
+    def __init__(self, *, grant: Callable[[int], None], answer_timeout_wall_s: float | None = None,
+                 explain: Callable[[], str] | None = None) -> None:
         self._grant = grant
-        self.answer_timeout_wall_s = answer_timeout_wall_s
+        self.answer_timeout_wall_s = PACE_ANSWER_WALL_S if answer_timeout_wall_s is None else answer_timeout_wall_s
+        self._explain = explain  # what the granting side knows of an unanswered grant (sends, failures)
+        self._failure: tuple[str, str] | None = None  # (operation, reason): the link behind the grants is gone
         self._now_s = 0.0
         self._started = False
         self._sleepers: list[tuple[float, int, asyncio.Future]] = []  # (deadline s, order, future): a heap
@@ -110,12 +113,21 @@ class PacedClock:
             self._started = False
             self._send(0)
 
+    def fail(self, *, operation: str, reason: str) -> None:
+        """The link that carries grants and answers is gone: every sleep raises LinkLost now, not after the
+        wall bound."""
+        self._failure = (operation, reason)
+        for _, _, future in self._sleepers:
+            if not future.done():
+                future.set_result(None)
+
     # ------------------------------------------------------------ the Clock protocol
 
     def now_s(self) -> float:
         return self._now_s
 
     async def sleep(self, duration_s: float) -> None:
+        self._raise_failure()
         if duration_s <= 0 or not self._started:
             await asyncio.sleep(0)
             return
@@ -138,6 +150,12 @@ class PacedClock:
             if joined:
                 self._sleeping[task] -= 1
             self._schedule_regrant()
+        self._raise_failure()
+
+    def _raise_failure(self) -> None:
+        if self._failure is not None:
+            operation, reason = self._failure
+            raise LinkLost(operation=operation, reason=reason)
 
     @contextlib.contextmanager
     def holding(self):
@@ -152,8 +170,11 @@ class PacedClock:
 
     def _stalled(self, silent_s: float) -> None:
         if self._granted_ms > round(self._now_s * 1000):
+            detail = self._explain() if self._explain is not None else ""
             raise LinkLost(operation="paced clock", reason=f"the simulator did not answer PRELAND_PACE for "
-                                                           f"{silent_s:.0f} wall s")
+                                                           f"{silent_s:.1f} wall s (held at {self._now_s * 1000:.0f} "
+                                                           f"ms, granted {self._granted_ms} ms"
+                                                           f"{'; ' + detail if detail else ''})")
         holders = sorted(task.get_name() for task in self._participants if not self._sleeping.get(task))
         state = (f"sensor tasks {', '.join(holders)} hold the vehicle's time without sleeping on its clock"
                  if holders else "exchanges with the vehicle under way" if self._holds else "nothing to grant")
