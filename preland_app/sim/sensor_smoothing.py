@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import replace
 
 from .multirotor import GRAVITY_M_S2, MultirotorState, rotation_body_to_ned
 
@@ -56,8 +55,12 @@ class SensorSmoothing:
         self._time_s = state.time_s
         if 0.0 < dt_s <= _MAX_DT_S:
             self._step(state, dt_s)
-        return replace(state, position_ned_m=tuple(self._p), velocity_ned_m_s=tuple(self._v),
-                       gyro_frd_rad_s=self._gyro, accel_frd_m_s2=self._accel)
+        p, v = self._p, self._v
+        return MultirotorState(time_s=state.time_s, position_ned_m=(p[0], p[1], p[2]),
+                               velocity_ned_m_s=(v[0], v[1], v[2]), quaternion_wxyz=state.quaternion_wxyz,
+                               gyro_frd_rad_s=self._gyro, accel_frd_m_s2=self._accel,
+                               motor_commands=state.motor_commands, on_ground=state.on_ground,
+                               rangefinder_down_m=state.rangefinder_down_m)
 
     def _step(self, state: MultirotorState, dt_s: float) -> None:
         tc = TIME_CONSTANT_S
@@ -80,12 +83,13 @@ class SensorSmoothing:
         gain = 2.0 * math.atan2(sin_half, w) / (sin_half * tc) if sin_half > 1e-12 else 0.0
         gyro = state.gyro_frd_rad_s
         self._gyro = (gyro[0] + x * gain, gyro[1] + y * gain, gyro[2] + z * gain)
-        rate = math.sqrt(sum(g * g for g in self._gyro))
+        g0, g1, g2 = self._gyro
+        rate = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
         if rate * dt_s > 1e-12:
             half = 0.5 * rate * dt_s
             k = math.sin(half) / rate
-            nq = _multiply(sq, (math.cos(half), self._gyro[0] * k, self._gyro[1] * k, self._gyro[2] * k))
-            norm = math.sqrt(sum(c * c for c in nq))
-            self._q = tuple(c / norm for c in nq)
+            nw, nx, ny, nz = _multiply(sq, (math.cos(half), g0 * k, g1 * k, g2 * k))
+            norm = math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+            self._q = (nw / norm, nx / norm, ny / norm, nz / norm)
         self._v = [self._v[i] + accel_ned[i] * dt_s for i in range(3)]
         self._p = [self._p[i] + self._v[i] * dt_s for i in range(3)]  # as SITL: with the new velocity
