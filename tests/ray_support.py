@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from preland_app.campaign.executors.ray import start_local_ray
 from preland_app.runtime.sitl import SITL_ENV
 
 from .conftest import ROOT
@@ -77,8 +78,8 @@ def cluster():
     previous = os.environ.get(SITL_ENV)
     os.environ[SITL_ENV] = NODE_SITL  # what Ray's processes inherit: the node's environment
     try:
-        ray.init(address="local", num_cpus=2, resources={"sitl": 1}, include_dashboard=False,
-                 logging_level=logging.WARNING, log_to_driver=False)
+        start_local_ray(ray, num_cpus=2, resources={"sitl": 1}, include_dashboard=False,
+                        logging_level=logging.WARNING, log_to_driver=False)
     finally:
         if previous is None:
             os.environ.pop(SITL_ENV)

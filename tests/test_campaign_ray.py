@@ -164,3 +164,41 @@ def test_an_address_asked_for_is_checked_even_when_this_process_joined_a_cluster
     assert result.exit_code == 2, result.output
     assert result.stderr.strip() == (f"preland: error: --executor ray: cannot reach a Ray cluster at 127.0.0.1:{port}: "
                                      "connection refused")
+
+
+class _SlowToStartRay:
+    """A stand-in for the `ray` module whose local node times out during startup `failures` times, as Ray's
+    node.py words it."""
+
+    def __init__(self, failures: int, error: str = "The current node timed out during startup. This could "
+                                                   "happen because some of the raylet failed to startup or the "
+                                                   "GCS has become overloaded.") -> None:
+        self.failures, self.error = failures, error
+        self.calls: list[str] = []
+
+    def init(self, **kwargs):
+        self.calls.append(f"init {kwargs['address']} {kwargs['num_cpus']}")
+        if self.failures:
+            self.failures -= 1
+            raise Exception(self.error)
+
+    def shutdown(self):
+        self.calls.append("shutdown")
+
+
+def test_a_local_ray_that_times_out_during_startup_is_started_again():
+    from preland_app.campaign.executors.ray import LOCAL_START_TRIES, start_local_ray
+
+    slow = _SlowToStartRay(failures=LOCAL_START_TRIES - 1)
+    start_local_ray(slow, num_cpus=2)
+    assert slow.calls == ["init local 2", "shutdown"] * (LOCAL_START_TRIES - 1) + ["init local 2"]
+
+    never = _SlowToStartRay(failures=LOCAL_START_TRIES)
+    with pytest.raises(Exception, match="timed out during startup"):
+        start_local_ray(never, num_cpus=2)
+    assert never.calls.count("init local 2") == LOCAL_START_TRIES and never.calls[-1] == "shutdown"
+
+    other = _SlowToStartRay(failures=1, error="some other failure")  # not retried
+    with pytest.raises(Exception, match="some other failure"):
+        start_local_ray(other, num_cpus=2)
+    assert other.calls == ["init local 2", "shutdown"]

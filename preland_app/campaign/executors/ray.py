@@ -24,6 +24,10 @@ from ..store import TrialRecord
 from ..trials import TrialJob, error_record, run_job
 from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, ExecutorOptions, TrialExecutor
 
+# Ray waits a fixed 30 s for a local node's raylet to register (ray/_private/node.py, not configurable); on a
+# loaded machine its daemons can take longer to start. A start that timed out so is tried again this many times.
+LOCAL_START_TRIES = 3
+_STARTUP_TIMED_OUT = "timed out during startup"
 CAPACITY_REFRESH_S = 10.0  # how often the cluster's CPUs are read again (an autoscaling cluster grows)
 REACH_TIMEOUT_S = 10.0  # how long a cluster address may take to accept a connection (Ray itself retries forever)
 
@@ -40,6 +44,20 @@ def check_reachable(address: str, *, timeout_s: float = REACH_TIMEOUT_S) -> None
         reason = (f"no answer within {timeout_s:g} s" if isinstance(error, TimeoutError)
                   else (error.strerror or str(error)).lower())
         raise ExecutorError(f"cannot reach a Ray cluster at {address}: {reason}") from None
+
+
+def start_local_ray(ray, **init) -> None:
+    """`ray.init(address="local", **init)`, tried again (up to LOCAL_START_TRIES in all) when the node
+    timed out during startup; anything else is raised at once. Whatever part of the instance had started is
+    stopped before each new try."""
+    for attempt in range(1, LOCAL_START_TRIES + 1):
+        try:
+            ray.init(address="local", **init)
+            return
+        except Exception as error:
+            ray.shutdown()
+            if _STARTUP_TIMED_OUT not in str(error) or attempt == LOCAL_START_TRIES:
+                raise
 
 
 def run_job_in_ray_worker(job: TrialJob, opencv_threads: int = 1) -> TrialRecord:
@@ -90,8 +108,8 @@ class RayExecutor(TrialExecutor):
             check_reachable(address)
         try:
             if address is None:
-                ray.init(address="local", num_cpus=self.options.workers or os.cpu_count() or 1,
-                         include_dashboard=False, **quiet)
+                start_local_ray(ray, num_cpus=self.options.workers or os.cpu_count() or 1, include_dashboard=False,
+                                **quiet)
             else:
                 ray.init(address=address, **quiet)
         except KeyboardInterrupt:
