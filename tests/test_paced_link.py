@@ -14,6 +14,23 @@ from preland_app.vehicle.mavlink_backend import MavlinkVehicle
 from .test_mavlink_runtime import PATIENCE_S, ServedSimulator
 
 
+def pace(vehicle, flight) -> None:
+    """Run `flight()` (sleeps on the vehicle's paced clock) with the vehicle's grant sender running, from the
+    clock's start at 1 s; the sender is stopped after it."""
+
+    async def main():
+        vehicle._background(vehicle._pace_sender(), "pace")
+        vehicle.clock.start(1.0)
+        try:
+            await asyncio.wait_for(flight(), timeout=PATIENCE_S)
+        finally:
+            vehicle._closed = True
+            for task in vehicle._tasks:
+                task.cancel()
+
+    asyncio.run(main())
+
+
 def test_a_grant_mavsdk_refuses_is_sent_again():
     vehicle = MavlinkVehicle(url="udpout://127.0.0.1:9", paced=True)
     clock = vehicle.clock
@@ -26,18 +43,7 @@ def test_a_grant_mavsdk_refuses_is_sent_again():
         asyncio.get_running_loop().call_soon(clock.held, fields["time_boot_ms"] / 1000)
 
     vehicle._send_now = send_now
-
-    async def main():
-        vehicle._background(vehicle._pace_sender(), "pace")
-        clock.start(1.0)
-        try:
-            await asyncio.wait_for(clock.sleep(0.5), timeout=PATIENCE_S)
-        finally:
-            vehicle._closed = True
-            for task in vehicle._tasks:
-                task.cancel()
-
-    asyncio.run(main())
+    pace(vehicle, lambda: clock.sleep(0.5))
     # The start's grant, then the sleep's (the newest wanted is what goes), refused; sent again
     # PACE_RESEND_WALL_S later, then answered.
     assert tries == [1000, 1500, 1500]
@@ -66,20 +72,13 @@ def test_an_answer_to_an_earlier_grant_does_not_stop_a_lost_grant_being_sent_aga
 
     vehicle._send_now = send_now
 
-    async def main():
-        vehicle._background(vehicle._pace_sender(), "pace")
-        clock.start(1.0)
-        try:
-            first = asyncio.ensure_future(clock.sleep(0.5))
-            await asyncio.sleep(0.05)
-            first.cancel()  # a wait that gave up: the earliest deadline is now the next sleeper's
-            await asyncio.wait_for(clock.sleep(1.0), timeout=PATIENCE_S)
-        finally:
-            vehicle._closed = True
-            for task in vehicle._tasks:
-                task.cancel()
+    async def flight():
+        first = asyncio.ensure_future(clock.sleep(0.5))
+        await asyncio.sleep(0.05)
+        first.cancel()  # a wait that gave up: the earliest deadline is now the next sleeper's
+        await clock.sleep(1.0)
 
-    asyncio.run(main())
+    pace(vehicle, flight)
     assert received == [1000, 1500, -2000, 2000]
     assert clock.now_s() == 2.0
 
