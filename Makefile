@@ -45,6 +45,7 @@ bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/record.py speed_budget.py
 	$(VENV)/bin/python benchmarks/record.py detector_variants.py
 	$(VENV)/bin/python benchmarks/record.py face_speed.py
+	$(VENV)/bin/python benchmarks/record.py bridge_step.py
 	$(VENV)/bin/python benchmarks/record.py campaign_wall_time.py
 	$(VENV)/bin/python benchmarks/record.py executor_overhead.py
 	$(VENV)/bin/python benchmarks/record.py store_growth.py

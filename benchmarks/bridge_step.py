@@ -1,0 +1,79 @@
+"""Wall time of one physics step of the JSON bridge (`sim/json_bridge.py`), the part of lock-step SITL on
+preland's physics that runs once per servo packet (800 a vehicle second at SIM_RATE_HZ 800): parsing the
+packet, the air (wind and gusts), the motor-level quad X, SITL's sensor smoothing and the reply's text.
+
+No SITL is needed: the bridge answers a fixed sequence of servo packets (a climb on unequal motors, then a
+wobble about hover) in the thesis mission's weather, on one core. Prints microseconds per step over
+`--steps` steps (the median of `--runs` runs) and a hash of every reply, so a rewrite of the step can be
+checked to answer SITL with the same text to the bit.
+
+Usage: python benchmarks/bridge_step.py [--steps N] [--runs N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import math
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from preland_app.config.mission import load_mission  # noqa: E402
+from preland_app.sim.air import AirAtVehicle  # noqa: E402
+from preland_app.sim.json_bridge import JsonBridge  # noqa: E402
+from preland_app.sim.multirotor import QuadXFrame, QuadXMultirotor  # noqa: E402
+from preland_app.sim.sitl_json import build_servo_packet  # noqa: E402
+
+RATE_HZ = 800  # runtime/data/sitl_json_quadx.parm SIM_RATE_HZ
+CLIMB_STEPS = 1600  # 2 vehicle s of climb before the wobble
+
+
+def packets(steps: int) -> list[bytes]:
+    out = []
+    for i in range(steps):
+        base = 1700 if i < CLIMB_STEPS else 1560
+        pwm = [base + int(30 * math.sin(i / 50.0 + k)) for k in range(4)]
+        out.append(build_servo_packet(frame_rate_hz=RATE_HZ, frame_count=i, pwm_us=pwm))
+    return out
+
+
+def run(steps: list[bytes]) -> tuple[float, str]:
+    mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
+    bridge = JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), port=0,
+                        air=AirAtVehicle(environment=mission.environment, seed=1))
+    digest = hashlib.sha256()
+    try:
+        started = time.perf_counter()
+        for packet in steps:
+            digest.update(bridge.handle(packet))
+        return (time.perf_counter() - started) / len(steps), digest.hexdigest()[:16]
+    finally:
+        bridge.stop()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--steps", type=int, default=8000)
+    parser.add_argument("--runs", type=int, default=5)
+    args = parser.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    steps = packets(args.steps)
+    results = [run(steps) for _ in range(args.runs)]
+    hashes = {h for _, h in results}
+    per_step_us = statistics.median(t for t, _ in results) * 1e6
+    print(f"JSON bridge, {args.steps} steps at {RATE_HZ} Hz ({args.steps / RATE_HZ:g} vehicle s), "
+          f"median of {args.runs} runs, one core")
+    print(f"  {per_step_us:.1f} us per step: {per_step_us * RATE_HZ / 1e6:.3f} wall s per vehicle s "
+          f"(the physics alone would run {1e6 / (per_step_us * RATE_HZ):.1f}x real time)")
+    print(f"  replies' hash {', '.join(sorted(hashes))}")
+
+
+if __name__ == "__main__":
+    main()
