@@ -260,11 +260,6 @@ class QuadXMultirotor:
         self._yaw_scale_m = 0.05 * f.diagonal_size_m  # SIM_Motor: yaw_scale = 0.05 * diagonal_size * thrust
         # SIM_Frame::calculate_forces: rot_accel -= gyro * radians(400) / refRotRate
         self._rot_damping_1_s = math.radians(400.0) / f.ref_rotation_rate_deg_s
-        # pwm_to_command's and thrust_fraction's terms, once: the same arithmetic, 800 times a vehicle second
-        span = f.pwm_max_us - f.pwm_min_us
-        self._pwm_low_us = f.pwm_min_us + f.spin_min * span
-        self._pwm_range_us = (f.pwm_min_us + f.spin_max * span) - self._pwm_low_us
-        self._expo = f.thrust_expo
         self.reset()
 
     def reset(self) -> None:
@@ -291,11 +286,9 @@ class QuadXMultirotor:
         f = self.frame
         lag = 1.0 if f.motor_time_constant_s <= 0 else 1.0 - math.exp(-dt_s / f.motor_time_constant_s)
         slew = f.motor_slew_max_per_s * dt_s if f.motor_slew_max_per_s > 0 else math.inf
-        low_us, range_us, commands = self._pwm_low_us, self._pwm_range_us, self._c
-        for i in range(len(commands)):
-            command = min(max((pwm_us[i] - low_us) / range_us, 0.0), 1.0)  # QuadXFrame.pwm_to_command
-            change = (command - commands[i]) * lag
-            commands[i] += min(max(change, -slew), slew)  # SIM_Motor's slew limit on the command
+        for i in range(len(self._c)):
+            change = (f.pwm_to_command(pwm_us[i]) - self._c[i]) * lag
+            self._c[i] += min(max(change, -slew), slew)  # SIM_Motor's slew limit on the command
 
         w, x, y, z = self._q
         r = rotation_body_to_ned(w, x, y, z)
@@ -313,15 +306,14 @@ class QuadXMultirotor:
         gx, gy, gz = self._w
         fx = fy = fz = 0.0
         tx = ty = tz = 0.0
-        expo = self._expo
         for (px, py, pz), yaw_factor, c in zip(self._positions, self._yaw_factors, self._c):
             # motor velocity through the air: body velocity plus rotation about the centre (gyro x r)
             mvx = vb[0] + gy * pz - gz * py
             mvy = vb[1] + gz * px - gx * pz
             mvz = vb[2] + gx * py - gy * px
             inflow = max(0.0, -mvz)  # air entering the rotor when the motor climbs (SIM_Motor)
-            thrust = self._max_thrust_n * (self._voltage_scale_sq * ((1.0 - expo) * c + expo * c * c)
-                                           - (inflow / self._max_outflow_m_s) ** 2)  # thrust_fraction(c)
+            thrust = self._max_thrust_n * (self._voltage_scale_sq * f.thrust_fraction(c)
+                                           - (inflow / self._max_outflow_m_s) ** 2)
             k = self._mdrag * math.sqrt(abs(thrust))
             mfx, mfy, mfz = -k * mvx, -k * mvy, -thrust - k * mvz
             fx += mfx
