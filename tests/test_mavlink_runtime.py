@@ -204,17 +204,32 @@ def fly_paced(mission, *, seed: int, **request) -> tuple:
 def _silence_heartbeats_in_flight(mission, *, seed: int, paced: bool, speedup: float = SPEEDUP) -> tuple:
     """Fly `mission` and silence the face's HEARTBEAT once the vehicle is in the air: (outcome, vehicle time
     of the silence, vehicle time the trial ended at). Paced, the trial ends where the companion lets the face
-    go (its PRELAND_PACE 0): the face then runs free, so its time when the trial's result is in is later."""
+    go (its PRELAND_PACE 0): the face then runs free, so its time when the trial's result is in is later.
+    Free, the face runs on while the companion closes the link, for as long as a loaded machine makes that
+    take: the trial ends where the companion's link check finds the link lost (the face's time then)."""
+    from preland_app.errors import LinkLost
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
+
     served = ServedSimulator(mission, seed=seed, speedup=speedup, paced=paced)
-    released_at = []
+    released_at, lost_at = [], []
     release = served.face._release_pace
+    check_link = MavlinkVehicle._check_link
 
     def recording_release():  # on the face's own loop
         if not released_at:
             released_at.append(served.simulator.time_s)
         release()
 
+    def recording_check_link(self, operation):
+        try:
+            check_link(self, operation)
+        except LinkLost:
+            if not lost_at:
+                lost_at.append(served.simulator.time_s)
+            raise
+
     served.face._release_pace = recording_release
+    MavlinkVehicle._check_link = recording_check_link
 
     async def main():
         trial = asyncio.ensure_future(fly_mavlink(TrialRequest(mission=mission, seed=seed), url=served.url,
@@ -234,11 +249,12 @@ def _silence_heartbeats_in_flight(mission, *, seed: int, paced: bool, speedup: f
             await until_async(lambda: bool(released_at), timeout_s=PATIENCE_S,
                               what="the companion to let the face go at the trial's end")
             return outcome, silenced_at, released_at[0]
-        return outcome, silenced_at, served.simulator.time_s
+        return outcome, silenced_at, lost_at[0] if lost_at else served.simulator.time_s
 
     try:
         return asyncio.run(main())
     finally:
+        MavlinkVehicle._check_link = check_link
         served.stop()
 
 
