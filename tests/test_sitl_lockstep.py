@@ -2,8 +2,10 @@
 the answer, the next), the companion's clock is a `LockstepClock` on the bridge's gate."""
 
 import asyncio
+import collections
 import math
 import threading
+import types
 
 from preland_app.sim.json_bridge import JsonBridge
 from preland_app.sim.multirotor import QuadXFrame, QuadXMultirotor
@@ -148,6 +150,72 @@ def test_a_message_sent_holds_the_physics_until_mavsdk_has_had_time_to_send_it(m
 
     _run_on_played_bridge(main)
     assert seen["sent_s"] == seen["woken_s"]  # over 0.3 wall s, with the physics free to run 0.95 vehicle s
+
+
+def test_an_exchange_whose_request_reaches_sitl_late_runs_time_once_it_has(monkeypatch):
+    """The relay passes a request on to SITL from its own thread and tells no one: while the request is not
+    in SITL's socket the physics stands, and once it is, time runs for the answer, however late that was
+    (a loaded machine: after EXCHANGE_DELIVERY_WALL_S, here 0), with nothing else here happening meanwhile."""
+    import preland_app.vehicle.lockstep_clock as lockstep_clock
+
+    monkeypatch.setattr(lockstep_clock, "EXCHANGE_DELIVERY_WALL_S", 0.0)
+    monkeypatch.setattr(lockstep_clock, "RELAYED_MAX_WALL_S", 60.0)  # only the relay's count lets time run
+    relay = types.SimpleNamespace(to_sitl=collections.Counter())
+    seen: dict[str, float] = {}
+
+    async def main(bridge: JsonBridge) -> None:
+        clock = LockstepClock(gate=bridge.gate, stall_wall_s=30.0, relay=relay)
+        loop = asyncio.get_running_loop()
+
+        async def mission() -> None:
+            await clock.sleep(5.0)
+
+        async def commander() -> None:
+            await clock.sleep(0.1)
+            with clock.exchanging(answered=lambda: False, sends="COMMAND_LONG"):
+                seen["asked_s"] = clock.now_s()
+                await loop.run_in_executor(None, lambda: until(lambda: bridge.gate.waiting, timeout_s=30,
+                                                               what="the physics at the hold"))
+                seen["held_s"] = clock.now_s()
+                await loop.run_in_executor(None, lambda: relay.to_sitl.update(["COMMAND_LONG"]))
+                await until_async(lambda: clock.now_s() >= seen["asked_s"] + 0.05, timeout_s=20,
+                                  what="time to run once the request is in SITL's socket")
+
+        await asyncio.gather(mission(), commander())
+
+    _run_on_played_bridge(main)
+    assert seen["held_s"] == seen["asked_s"]
+
+
+def test_a_physics_this_clock_holds_for_too_long_is_not_called_a_silent_sitl(monkeypatch):
+    """SITL's packet is in and this clock holds it (a request never relayed): the stall names the hold, not a
+    SITL that sent nothing."""
+    import preland_app.vehicle.lockstep_clock as lockstep_clock
+    from preland_app.errors import WaitTimeout
+
+    monkeypatch.setattr(lockstep_clock, "EXCHANGE_DELIVERY_WALL_S", 0.0)
+    monkeypatch.setattr(lockstep_clock, "RELAYED_MAX_WALL_S", 60.0)
+    relay = types.SimpleNamespace(to_sitl=collections.Counter())
+    raised: list[BaseException] = []
+
+    async def main(bridge: JsonBridge) -> None:
+        clock = LockstepClock(gate=bridge.gate, stall_wall_s=1.0, relay=relay)
+
+        async def mission() -> None:
+            try:
+                await clock.sleep(5.0)
+            except WaitTimeout as error:
+                raised.append(error)
+
+        async def commander() -> None:
+            await clock.sleep(0.1)
+            with clock.exchanging(answered=lambda: False, sends="COMMAND_LONG"):
+                await until_async(lambda: raised, timeout_s=30, what="the mission's sleep to end")
+
+        await asyncio.gather(mission(), commander())
+
+    _run_on_played_bridge(main)
+    assert "with SITL's packet in, held by this clock (0 messages being sent, 1 exchanges" in str(raised[0])
 
 
 def test_an_exchange_runs_time_until_its_answer_is_read_then_holds_until_it_ends(monkeypatch):

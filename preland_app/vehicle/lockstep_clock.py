@@ -97,6 +97,7 @@ class LockstepClock:
         self._answered: list[Callable[[], bool]] = []  # of the exchanges running: is its answer in?
         self._undelivered: list[Callable[[], bool]] = []  # of the exchanges running: has SITL its request?
         self._sending = 0  # messages just handed to MAVSDK, given DELIVERY_WALL_S to leave
+        self._delivery_watched = False  # a look at the undelivered requests is due (see _apply)
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
         self._relay = relay
         self.listened: collections.Counter[str] | None = None  # the vehicle's messages taken in, by name
@@ -270,8 +271,14 @@ class LockstepClock:
             heapq.heappop(self._sleepers)
         now_s = self.now_s()
         wake_s = self._sleepers[0][0] if self._sleepers else math.inf
+        undelivered = not all(delivered() for delivered in self._undelivered)
+        if undelivered and self._loop is not None and not self._delivery_watched:
+            # The relay passes a request on from its own thread and tells no one: look again until SITL
+            # has it (or its bound has passed), else time would stand for good.
+            self._delivery_watched = True
+            self._loop.call_later(SETTLE_WALL_S, self._delivery_look)
         if (self._holders() or self._sending or any(answered() for answered in self._answered)
-                or not all(delivered() for delivered in self._undelivered)):
+                or undelivered):
             # A reading is being made, a request is on its way to SITL or an answer to its task: the vehicle waits.
             hold_s = now_s
         elif self._exchanges:
@@ -281,6 +288,10 @@ class LockstepClock:
         self._gate.hold_at(hold_s)
         if not math.isinf(wake_s):
             self._gate.wake_at(wake_s, self._woken)
+
+    def _delivery_look(self) -> None:
+        self._delivery_watched = False
+        self._update()
 
     # ---------------------------------------------------------------- waking
 
@@ -380,6 +391,11 @@ class LockstepClock:
         if any(answered() for answered in self._answered):
             raise WaitTimeout(operation="lock-step clock: time to pass", timeout_s=round(silent_wall_s, 1),
                               last_state="an answer read off the link has not reached the task waiting for it")
+        if self._gate.waiting:  # SITL's packet is here, held by this clock: say what else holds it
+            raise WaitTimeout(operation="lock-step clock: time to pass", timeout_s=round(silent_wall_s, 1),
+                              last_state=f"the physics stands at {self.now_s():.3f} s with SITL's packet in, held "
+                                         f"by this clock ({self._sending} messages being sent, "
+                                         f"{self._exchanges} exchanges, settling {self._settling})")
         raise LinkLost(operation="lock-step physics", reason=f"SITL sent no servo packet for "
                                                              f"{silent_wall_s:.0f} wall s")
 
