@@ -87,3 +87,28 @@ def test_sitl_that_stops_answering_ends_as_link_lost_in_bounded_time(fake_sitl, 
     assert elapsed_s < 20.0
     _wait_dead(launch["pid"])
     assert _bridge_threads() == []
+
+
+def test_a_sitl_that_exits_during_a_trial_is_told_with_its_last_line_on_stderr(tmp_path):
+    """Its exit code alone says little: the last line SITL wrote to stderr goes with it."""
+    import asyncio
+
+    from preland_app.runtime.sitl import SitlInstance
+
+    flag = tmp_path / "exit-now"
+    binary = tmp_path / "arducopter"
+    # Answers --help at once (as arducopter does); launched, it runs until the test says, then fails.
+    binary.write_text(f"#!/bin/sh\n[ \"$1\" = --help ] && exit 0\necho starting >&2\n"
+                      f"while [ ! -e {flag} ]; do sleep 0.05; done\necho 'bind failed: Address in use' >&2\nexit 3\n")
+    binary.chmod(0o755)
+
+    async def main() -> str | None:
+        async with SitlInstance(options=SitlOptions(binary=binary, speedup=1.0), params={}) as sitl:
+            assert sitl.exit_description() is None
+            flag.touch()
+            await asyncio.get_running_loop().run_in_executor(
+                None, lambda: until(lambda: sitl.exit_description() is not None, timeout_s=30,
+                                    what="the stand-in SITL to exit"))
+            return sitl.exit_description()
+
+    assert asyncio.run(main()) == "exited with code 3 (its last line on stderr: bind failed: Address in use)"

@@ -420,11 +420,21 @@ class SitlInstance:
             self.stop()
             raise
         if self.process.poll() is not None:
-            tail = (folder / "stderr.txt").read_text(errors="replace").strip().splitlines()[-1:] or [""]
+            tail = self._stderr_tail()
             code = self.process.returncode
             self._release()
-            raise SitlError(f"{self.options.binary} exited at once (code {code}) {tail[0]}".strip())
+            raise SitlError(f"{self.options.binary} exited at once (code {code}) {tail}".strip())
         return self
+
+    def _stderr_tail(self) -> str:
+        """The last line SITL wrote to its stderr ("" without one)."""
+        if self._folder is None:
+            return ""
+        try:
+            lines = Path(self._folder.name, "stderr.txt").read_text(errors="replace").strip().splitlines()
+        except OSError:
+            return ""
+        return lines[-1].strip() if lines else ""
 
     async def __aexit__(self, *exc: object) -> None:
         self.stop()
@@ -439,7 +449,8 @@ class SitlInstance:
                 return f"killed by {signal.Signals(-code).name}"
             except ValueError:
                 return f"killed by signal {-code}"
-        return f"exited with code {code}"
+        tail = self._stderr_tail()
+        return f"exited with code {code}" + (f" (its last line on stderr: {tail})" if tail else "")
 
     async def watch(self, vehicle: MavlinkVehicle) -> None:
         """Raise SitlExited as soon as the SITL process ends (its trial cannot go on), and
