@@ -6,10 +6,11 @@ PID.airborne file there once the vehicle is in the air.
 
 With `--model JSON:HOST` it also acts as SITL on its JSON interface: servo packets (a constant PWM just
 below the quad X's hover, so the physics stays on the ground) to HOST at `--sim-port-out` (else 9002 +
-10 x instance) at FRAME_RATE_HZ of its scaled clock, each waited for as SITL waits (resent after 1 wall s),
-and, unlike SITL, which would wait for ever, exits with code 3 naming the missing answer after
-ANSWER_TIMEOUT_S wall s. It writes the answers it got to PID.json_answers (a count). Its flight stays the
-embedded simulator's, served over MAVLink as without JSON."""
+10 x instance) at FRAME_RATE_HZ of its scaled clock, each waited for as SITL waits: for ever, resent after
+each wall second without an answer. It writes the answers it got to PID.json_answers (a count). Its flight
+stays the embedded simulator's, served over MAVLink as without JSON, but on SITL's clock in lock-step: the
+physics' time (answers / FRAME_RATE_HZ); the next servo packet leaves only once the face has served the
+time of the last answer (SITL runs its loop, MAVLink included, before it asks for the next step)."""
 
 import argparse
 import asyncio
@@ -58,7 +59,8 @@ SITL_FLOAT_PARAMS = ("SIM_GPS_GLITCH_X", "SIM_GPS_GLITCH_Y", "SIM_GPS_GLITCH_Z")
 
 FRAME_RATE_HZ = 100  # physics steps per scaled second: a few hundred packets per wall s, cheap for CI
 RESEND_S = 1.0  # SIM_JSON::recv_fdm resends the servos after 1 wall s without an answer
-ANSWER_TIMEOUT_S = 5.0  # wall s without an answer before the stand-in gives up (SITL would wait for ever)
+SERVED_TIMEOUT_S = 60.0  # wall s for the face (this process) to serve a physics time before giving up
+_SAME_S = 1e-6  # two times closer than this are one (the face's steps add up 1 / FRAME_RATE_HZ)
 
 
 def _write_whole(path: Path, text: str) -> None:
@@ -68,14 +70,59 @@ def _write_whole(path: Path, text: str) -> None:
     os.replace(partial, path)
 
 
-def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | None) -> None:
-    """SITL's side of the JSON interface, in lock-step: send a servo packet, wait for its answer, next frame."""
+class PhysicsTime:
+    """SITL's clock on its JSON interface: the physics' time, which moves only with an answer. The face sleeps
+    on it (one task: its step loop); the JSON side moves it, then waits until the face sleeps past it."""
+
+    def __init__(self) -> None:
+        self._answers = 0
+        self._changed = threading.Condition()
+        self._sleeper: tuple[float, asyncio.Future, asyncio.AbstractEventLoop] | None = None
+
+    def now_s(self) -> float:
+        return self._answers / FRAME_RATE_HZ
+
+    async def sleep(self, duration_s: float) -> None:
+        loop = asyncio.get_running_loop()
+        future = loop.create_future()
+        with self._changed:
+            deadline_s = self.now_s() + max(0.0, duration_s)
+            if deadline_s <= self.now_s() + _SAME_S:
+                return
+            self._sleeper = (deadline_s, future, loop)
+            self._changed.notify_all()
+        await future
+
+    def answered(self) -> None:
+        """The physics answered a servo packet: its time moves one frame on (the JSON side's thread)."""
+        with self._changed:
+            self._answers += 1
+            if self._sleeper is not None and self._sleeper[0] <= self.now_s() + _SAME_S:
+                _, future, loop = self._sleeper
+                self._sleeper = None
+                loop.call_soon_threadsafe(lambda: future.done() or future.set_result(None))
+
+    def wait_served(self, timeout_s: float) -> bool:
+        """Until the face sleeps past the physics' time (it has stepped and served up to it); False after
+        `timeout_s` wall s."""
+        with self._changed:
+            return self._changed.wait_for(
+                lambda: self._sleeper is not None and self._sleeper[0] > self.now_s() + _SAME_S, timeout=timeout_s)
+
+
+def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | None,
+                       physics_time: PhysicsTime) -> None:
+    """SITL's side of the JSON interface, in lock-step: send a servo packet, wait for its answer, let the face
+    serve the new time, next frame."""
     pwm = [round(QuadXFrame().hover_pwm_us()) - 50] * 4 + [0] * 12
     answers_file = Path(log_dir, f"{os.getpid()}.json_answers") if log_dir else None
     answers, noted_at = 0, 0.0
     frame_wall_s = 1.0 / (FRAME_RATE_HZ * speedup)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.settimeout(RESEND_S)
+        if not physics_time.wait_served(SERVED_TIMEOUT_S):  # the face runs from time 0, as SITL on the physics
+            print(f"fake SITL: the face did not start within {SERVED_TIMEOUT_S:g} s", file=sys.stderr, flush=True)
+            os._exit(3)
         next_at = time.monotonic()
         for frame_count in range(2**32):
             packet = build_servo_packet(frame_rate_hz=FRAME_RATE_HZ, frame_count=frame_count, pwm_us=pwm)
@@ -86,12 +133,14 @@ def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | N
                     sock.recv(4096)
                     break
                 except socket.timeout:
-                    if time.monotonic() - sent_at > ANSWER_TIMEOUT_S:
-                        print(f"fake SITL: no JSON physics answer to servo packet {frame_count} from "
-                              f"{host}:{port} within {ANSWER_TIMEOUT_S:g} s", file=sys.stderr, flush=True)
-                        os._exit(3)
+                    print("No JSON sensor message received, resending servos", flush=True)  # as SITL says it
                     sock.sendto(packet, (host, port))  # the same frame_count again, as SITL resends
             answers += 1
+            physics_time.answered()
+            if not physics_time.wait_served(SERVED_TIMEOUT_S):
+                print(f"fake SITL: the face did not serve physics time {physics_time.now_s():.2f} s within "
+                      f"{SERVED_TIMEOUT_S:g} s", file=sys.stderr, flush=True)
+                os._exit(3)
             if answers_file is not None and (answers == 1 or sent_at - noted_at > 0.2):
                 _write_whole(answers_file, f"{answers}\n")
                 noted_at = sent_at
@@ -160,13 +209,15 @@ def main(args: argparse.Namespace) -> None:
                 noted = True
 
         simulator.step = step_and_note
-    if args.model and args.model.startswith("JSON"):
+    on_json = bool(args.model and args.model.startswith("JSON"))
+    clock = PhysicsTime() if on_json else ScaledWallClock(speedup=args.speedup)
+    if on_json:
         host = args.model.partition(":")[2] or "127.0.0.1"
         port = args.sim_port_out if args.sim_port_out is not None else DEFAULT_PORT + 10 * args.instance
         threading.Thread(target=serve_json_physics, daemon=True,
-                         kwargs={"host": host, "port": port, "speedup": args.speedup, "log_dir": log_dir}).start()
-    face = SitlFace(simulator=simulator, clock=ScaledWallClock(speedup=args.speedup), listen=args.serial0,
-                    sim_values=given)
+                         kwargs={"host": host, "port": port, "speedup": args.speedup, "log_dir": log_dir,
+                                 "physics_time": clock}).start()
+    face = SitlFace(simulator=simulator, clock=clock, listen=args.serial0, sim_values=given)
     asyncio.run(face.run())
 
 
