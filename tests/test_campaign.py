@@ -157,12 +157,19 @@ def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
         if stored >= 3:
             break
         time.sleep(0.05)
+    workers = sorted(set(workers) | set(_children(process.pid)))  # a worker started since is one too
     os.kill(process.pid, signal.SIGKILL)
     process.wait(timeout=10)
     assert 3 <= stored < 12, "the campaign should be killed part way"
+
+    def living(pid: int) -> bool:
+        try:
+            return "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()
+        except OSError:  # gone, or going while read
+            return False
+
     def orphans() -> list[int]:
-        return [pid for pid in workers if Path(f"/proc/{pid}").exists()
-                and "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()]
+        return [pid for pid in workers if living(pid)]
 
     # The workers notice their parent has gone and exit: bounded, not a fixed sleep.
     until(lambda: not orphans(), timeout_s=30, what="the orphaned workers to exit")
@@ -175,6 +182,20 @@ def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
         assert len(resumed.trials("quick")) == 12
         assert len({(t["scenario"], t["trial_index"]) for t in resumed.trials("quick")}) == 12
         assert comparable(resumed, "quick") == comparable(straight, "quick")
+
+
+def test_a_worker_whose_campaign_died_while_it_started_exits_instead_of_waiting_for_ever():
+    """A worker asks to die with the campaign process as it starts; one whose campaign was killed before it
+    asked (the signal then never comes) exits by itself, and one whose campaign lives goes on."""
+    code = ("import sys\nfrom preland_app.campaign.executors.local import _worker_init\n"
+            "_worker_init(int(sys.argv[1]))\nprint('went on')\n")
+    alive = subprocess.run([sys.executable, "-c", code, str(os.getpid())], cwd=ROOT, capture_output=True,
+                           text=True, timeout=120)
+    assert (alive.returncode, alive.stdout) == (0, "went on\n"), alive.stderr
+    # The pid the worker was started for is not its parent's: that campaign is gone.
+    orphaned = subprocess.run([sys.executable, "-c", code, str(os.getpid() + 1)], cwd=ROOT, capture_output=True,
+                              text=True, timeout=120)
+    assert (orphaned.returncode, orphaned.stdout) == (1, ""), orphaned.stderr
 
 
 BAD = {

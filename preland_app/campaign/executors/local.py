@@ -23,19 +23,23 @@ from ..trials import TrialJob, error_record, run_job
 from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, ExecutorOptions, TrialExecutor
 
 
-def _worker_init() -> None:
+def _worker_init(campaign_pid: int) -> None:
     """Workers die with the campaign process (a killed campaign leaves no orphans) and ignore Ctrl-C
     (the campaign process handles it). OpenCV runs on the worker's own thread: the pool already has a
     process per core, and OpenCV's thread pool on top would make them compete."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    import cv2
-
-    cv2.setNumThreads(1)
     try:
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
         libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except OSError:
         pass  # not Linux: workers still exit when their pipe closes
+    if os.getppid() != campaign_pid:
+        # The campaign died while this worker started, before the signal was asked for, which then never
+        # comes; and the worker, holding its own end of the call queue, would wait on it for ever.
+        os._exit(1)
+    import cv2
+
+    cv2.setNumThreads(1)
 
 
 class LocalExecutor(TrialExecutor):
@@ -67,7 +71,7 @@ class LocalExecutor(TrialExecutor):
 
     def _new_pool(self) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_worker_init)
+                                   initializer=_worker_init, initargs=(os.getpid(),))
 
     def slots(self) -> int:
         return self.workers
