@@ -242,8 +242,7 @@ class LockstepClock:
         self._undelivered.append(delivered)
         if answered is not None:
             self._answered.append(answered)
-        asyncio.get_running_loop().call_later(EXCHANGE_DELIVERY_WALL_S, self._update)
-        self._update()
+        self._update()  # which looks again until the request is delivered (see _apply)
         try:
             yield
         finally:
@@ -272,9 +271,9 @@ class LockstepClock:
         now_s = self.now_s()
         wake_s = self._sleepers[0][0] if self._sleepers else math.inf
         undelivered = not all(delivered() for delivered in self._undelivered)
-        if undelivered and self._loop is not None and not self._delivery_watched:
-            # The relay passes a request on from its own thread and tells no one: look again until SITL
-            # has it (or its bound has passed), else time would stand for good.
+        if undelivered and not self._delivery_watched:
+            # Nothing tells this clock when a request is delivered (the relay passes it on from its own
+            # thread; without one, a wall time passes): look again until it is, else time would stand.
             self._delivery_watched = True
             self._loop.call_later(SETTLE_WALL_S, self._delivery_look)
         if (self._holders() or self._sending or any(answered() for answered in self._answered)
