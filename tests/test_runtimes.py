@@ -263,3 +263,17 @@ def test_a_runtime_urls_own_options_reach_the_trial_from_fly_and_a_campaign(tmp_
                                       "--workers", "1", "--runtime", url])
     assert result.exit_code == 0, result.output
     assert [(o.speedup, o.defaults) for o in flown] == [(3.5, ((tmp_path / "extra.parm").resolve(),))] * 2
+
+
+def test_the_gyro_error_is_a_sitl_option_of_preland_physics_only(tmp_path):
+    sitl = open_runtime(f"sitl:{tmp_path}/arducopter?physics=preland&gyro_error=0.43")
+    assert sitl.options.gyro_error == 0.43 and sitl.options.physics == "preland"
+    assert open_runtime(f"sitl:{tmp_path}/arducopter").options.gyro_error == 0.0
+    with pytest.raises(RuntimeOptionError, match="gyro_error: applies to preland's physics only"):
+        open_runtime(f"sitl:{tmp_path}/arducopter?gyro_error=0.43")
+    with pytest.raises(RuntimeOptionError, match="gyro_error: must be a number, got 'much'"):
+        open_runtime(f"sitl:{tmp_path}/arducopter?physics=preland&gyro_error=much")
+    with pytest.raises(RuntimeOptionError, match="gyro_error: must be a number >= 0, got -1"):
+        open_runtime(f"sitl:{tmp_path}/arducopter?physics=preland&gyro_error=-1")
+    with pytest.raises(RuntimeOptionError, match="gyro_error: does not apply to the sim: runtime"):
+        open_runtime("sim:", {"gyro_error": 0.43})

@@ -57,9 +57,13 @@ def test_a_trial_on_sitl_launches_a_fresh_instance_and_stops_it(fake_sitl, thesi
 
     script, logs = fake_sitl
     outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2),
-                             options=SitlOptions(binary=script, tlog_dir=tmp_path / "tlogs"),
+                             options=SitlOptions(binary=script, tlog_dir=tmp_path / "tlogs",
+                                                 log_dir=tmp_path / "dataflash"),
                              tlog_name="trial.tlog")
     assert outcome.outcome is Outcome.LANDED, outcome.message
+    # SITL's own dataflash log outlives its temporary folder, named as the trial's telemetry log.
+    kept = (tmp_path / "dataflash" / "trial.BIN").read_text()
+    assert kept == f"stand-in dataflash log of instance {outcome.details['sitl_instance']}\n"
     # The stand-in's GPS error is its own simulator's, moved along in scaled wall time: the same seed has
     # missed by 12 to 37 cm from run to run, so only the bound of a GPS landing is checked here.
     assert outcome.details["runtime"] == "sitl" and 0.0 < outcome.landing_error_cm < 300.0
@@ -356,6 +360,26 @@ def test_the_thesis_mission_lands_on_preland_physics_on_real_sitl(thesis_mission
         assert outcome.details["landing_targets_sent"] > 50
         assert outcome.landing_error_cm < 15.0
     assert _bridge_threads() == [] and _children() == []
+
+
+@needs_real_sitl
+def test_a_gyro_error_on_preland_physics_makes_arducopters_attitude_estimate_err(thesis_mission, tmp_path):
+    from preland_app.runtime.sitl_log import attitude_estimate_errors_deg, rms
+
+    estimate_error_deg = {}
+    for gyro_error in (0.0, 0.43):
+        outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=1, land_mode="irlock"),
+                                 options=SitlOptions(binary=Path(REAL_SITL), physics="preland", gyro_error=gyro_error,
+                                                     log_dir=tmp_path),
+                                 tlog_name=f"gyro{gyro_error}.tlog")
+        assert outcome.outcome is Outcome.LANDED, outcome.message
+        errors = attitude_estimate_errors_deg(tmp_path / f"gyro{gyro_error}.BIN")
+        assert len(errors) > 400  # ATT and SIM of every logged instant in the air (10 a vehicle second)
+        estimate_error_deg[gyro_error] = rms(errors)
+    # A true IMU: ArduCopter's EKF within about 0.1 degree (benchmarks/sitl_attitude_error.py: 0.09 to 0.12 a
+    # trial); 0.43 of the mission's 0.7 degrees: about the mission's attitude error (0.49 to 0.79 a trial).
+    assert estimate_error_deg[0.0] < 0.2
+    assert 0.35 < estimate_error_deg[0.43] < 1.2
 
 
 @needs_real_sitl

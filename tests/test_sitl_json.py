@@ -311,3 +311,57 @@ def test_the_bridge_flies_in_the_trial_seeds_air_and_tells_sitl_of_it():
         assert winds == [embedded.step(dt_s=DT_S, altitude_m=10.0, airspeed_m_s=math.hypot(*embedded.current_ned_m_s[:2]))
                          for _ in range(10 * RATE_HZ)]
         assert max(abs(w[0] - winds[0][0]) for w in winds) > 0.05  # the gusts blow
+
+
+def test_a_gyro_error_reaches_sitls_roll_and_pitch_rates_only_and_repeats_with_its_seed():
+    from preland_app.sim.imu import GyroError
+    from preland_app.sim.spec import NavigationSpec
+
+    spec = NavigationSpec(attitude_noise_sigma_deg=0.7, attitude_noise_tau_s=0.5)
+    hover = [int(QuadXFrame().hover_pwm_us())] * 4 + [1000] * 12
+    flown = {}
+    for name, error in (("true", None), ("seed 4", GyroError.for_mission(spec, seed=4, per_attitude_error=0.5)),
+                        ("seed 4 again", GyroError.for_mission(spec, seed=4, per_attitude_error=0.5))):
+        bridge = JsonBridge(model=airborne(), port=0, packet_timeout_s=10.0, gyro_error=error).start()
+        sitl = StandInSitl(bridge.address)
+        try:
+            flown[name] = [sitl.exchange(frame, hover) for frame in range(RATE_HZ)]
+        finally:
+            sitl.close()
+            bridge.stop()
+    assert flown["seed 4"] == flown["seed 4 again"]
+    expected = GyroError.for_mission(spec, seed=4, per_attitude_error=0.5)
+    for true, erred in zip(flown["true"], flown["seed 4"]):
+        # The physics flies the same: only the body rates SITL is told differ, by the error's own sequence.
+        assert erred["position"] == true["position"] and erred["quaternion"] == true["quaternion"]
+        assert erred["imu"]["accel_body"] == true["imu"]["accel_body"]
+        assert erred["imu"]["gyro"][2] == true["imu"]["gyro"][2]
+        stepped = expected.applied(airborne().state, DT_S).gyro_frd_rad_s
+        for axis in (0, 1):
+            assert erred["imu"]["gyro"][axis] - true["imu"]["gyro"][axis] == pytest.approx(stepped[axis], abs=1e-12)
+    assert max(abs(r["imu"]["gyro"][0] - t["imu"]["gyro"][0]) for r, t in zip(flown["seed 4"], flown["true"])) > 1e-4
+
+
+def test_the_gyro_errors_spread_and_time_constant_are_the_missions_attitude_error_scaled():
+    from preland_app.sim.imu import GyroError
+    from preland_app.sim.multirotor import MultirotorState
+    from preland_app.sim.spec import NavigationSpec
+
+    spec = NavigationSpec(attitude_noise_sigma_deg=0.7, attitude_noise_tau_s=0.5)
+    assert GyroError.for_mission(spec, seed=1, per_attitude_error=0.0) is None
+    assert GyroError.for_mission(NavigationSpec(attitude_noise_sigma_deg=0.0), seed=1, per_attitude_error=0.5) is None
+    error = GyroError.for_mission(spec, seed=1, per_attitude_error=0.5)
+    rest = MultirotorState(time_s=0.0, position_ned_m=(0.0, 0.0, 0.0), velocity_ned_m_s=(0.0, 0.0, 0.0),
+                           quaternion_wxyz=(1.0, 0.0, 0.0, 0.0), gyro_frd_rad_s=(0.0, 0.0, 0.0),
+                           accel_frd_m_s2=(0.0, 0.0, -GRAVITY_M_S2), motor_commands=(0.0,) * 4, on_ground=True,
+                           rangefinder_down_m=0.0)
+    dt_s = 1.0 / 800
+    rolls = [error.applied(rest, dt_s).gyro_frd_rad_s[0] for _ in range(800 * 600)]  # 600 vehicle s
+    sigma = math.radians(0.7) * 0.5
+    # 600 s hold about 600 independent values of a 0.5 s process: the spread within 10 %, the lag-tau
+    # autocorrelation near 1/e.
+    spread = math.sqrt(sum(r * r for r in rolls) / len(rolls))
+    assert spread == pytest.approx(sigma, rel=0.1)
+    lag = 400  # 0.5 s at 800 Hz
+    correlation = sum(a * b for a, b in zip(rolls, rolls[lag:])) / (len(rolls) - lag) / spread ** 2
+    assert correlation == pytest.approx(math.exp(-1.0), abs=0.1)

@@ -23,7 +23,7 @@ RESULT_SCRIPTS = ("fault_scenarios_table.py", "land_modes_table.py", "normal_lan
                   "fault_kinds.py",
                   "detector_variants.py",
                   "sitl_vs_embedded.py",
-                  "json_bridge_hover.py", "sitl_air.py", "sitl_lockstep.py")
+                  "json_bridge_hover.py", "sitl_air.py", "sitl_attitude_error.py", "sitl_lockstep.py")
 
 
 def _summary(script: Path) -> str:

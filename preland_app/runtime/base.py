@@ -6,7 +6,7 @@ One object flies every trial of `preland fly`, `preland campaign run` and the Py
 | URL | runtime |
 |---|---|
 | `sim:` (the default) | the embedded simulator, in virtual time |
-| `sitl:PATH` (`sitl:` for `$PRELAND_SITL_BINARY`), `?speedup=X&defaults=A.parm,B.parm` | a fresh ArduPilot SITL process per trial |
+| `sitl:PATH` (`sitl:` for `$PRELAND_SITL_BINARY`), `?speedup=X&defaults=A.parm,B.parm&physics=preland&gyro_error=X` | a fresh ArduPilot SITL process per trial |
 | `mavlink+udp://[HOST]:PORT`, `mavlink+udpout://HOST:PORT`, `mavlink+tcp://HOST:PORT`, `mavlink+serial:///dev/DEVICE?baud=N` | a vehicle over MAVLink: `preland sim serve`, a SITL already running, a drone |
 
 A runtime's options are one frozen dataclass of its own (`options_type`); an option that does not apply to

@@ -21,7 +21,8 @@ step, to a `JsonBridge` serving from a thread of the trial's process on a port o
 sitl_json_quadx.parm) follow the copter defaults. On preland's physics the air is the embedded
 simulator's (`sim/air.py`: the scenario's wind, Dryden gusts and rotor wash from the trial seed's
 streams), sent to SITL as `velocity_wind`; SITL's own SIM_WIND_* blow only on its own physics and are
-not set. The bridge is stopped with its SITL.
+not set. The body rates SITL's IMU reads carry the mission's attitude error as a gyro error (`sim/imu.py`).
+The bridge is stopped with its SITL.
 
 On preland's physics the trial runs in lock-step with it (`vehicle.lockstep_clock`): the companion's
 clock is the physics' time, each camera frame and IR-LOCK reading shows the physics' state at its own
@@ -36,8 +37,10 @@ import asyncio
 import ctypes
 import fcntl
 import functools
+import logging
 import math
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -52,6 +55,7 @@ from ..outcome import TrialOutcome
 from ..sim.navigation import gps_drift
 from ..sim.noise import GaussianStream, child_rng
 from ..sim.air import AirAtVehicle
+from ..sim.imu import GyroError
 from ..sim.json_bridge import JsonBridge, JsonBridgeTimeout
 from ..sim.multirotor import QuadXFrame, QuadXMultirotor
 from ..sim.spec import DEFAULT_HOME, NavigationSpec
@@ -61,6 +65,8 @@ from ..vehicle.mavlink_backend import MavlinkVehicle
 from .base import RuntimeOptionError, TrialRequest, build_options
 from .mavlink import fly_mavlink
 from .sitl_relay import MavlinkRelay
+
+logger = logging.getLogger(__name__)
 
 SITL_ENV = "PRELAND_SITL_BINARY"
 MAX_INSTANCES = 64
@@ -132,17 +138,21 @@ class SitlOptions:
     """How to run SITL: the binary (None: $PRELAND_SITL_BINARY of the machine a trial runs on, as cluster
     nodes each have their own), its --speedup (None: SPEEDUP_CAMERA for a land mode that reads camera
     frames, else SPEEDUP_NO_CAMERA), extra --defaults files (after the copter defaults), extra parameters,
-    a folder for one .tlog per trial (None: no logs), a UDP address for the thesis' fault command
-    (None: none), and the physics: `ardupilot` (SITL's own) or `preland` (preland's quad X over SITL's
-    JSON interface)."""
+    a folder for one .tlog per trial (None: no logs), a folder for SITL's own dataflash log of each trial
+    (`log_dir`, a .BIN named as the trial's .tlog; None: not kept), a UDP address for the thesis' fault command
+    (None: none), the physics: `ardupilot` (SITL's own) or `preland` (preland's quad X over SITL's
+    JSON interface), and on preland's physics a gyro error (`gyro_error`, 1/s: the error's standard
+    deviation in rad/s per radian of the mission's attitude error, `sim/imu.py`; 0: a true IMU)."""
 
     binary: Path | None
     speedup: float | None = None
     defaults: tuple[Path, ...] = ()
     extra_params: dict[str, float] = field(default_factory=dict)
     tlog_dir: Path | None = None
+    log_dir: Path | None = None
     fault_listen: str | None = None
     physics: str = "ardupilot"
+    gyro_error: float = 0.0
 
     def speedup_for(self, *, uses_camera: bool) -> float:
         """The --speedup of a trial whose land mode does (or does not) read camera frames; on preland's
@@ -171,8 +181,8 @@ SPEEDUP_RANGE = (0.1, 1000.0)
 @dataclass(frozen=True)
 class SitlRuntime:
     """ArduPilot SITL (`sitl:PATH`, `sitl:` for $PRELAND_SITL_BINARY; query `speedup=X`,
-    `defaults=A.parm,B.parm`, `physics=ardupilot|preland`): a fresh `arducopter` process per trial,
-    scored from its SIM_STATE."""
+    `defaults=A.parm,B.parm`, `physics=ardupilot|preland`, `gyro_error=X` on preland's physics): a fresh
+    `arducopter` process per trial, scored from its SIM_STATE."""
 
     scheme: ClassVar[str] = "sitl"
     name: ClassVar[str] = "sitl"
@@ -200,8 +210,15 @@ class SitlRuntime:
                 values["defaults"] = tuple(Path(part) for part in text.split(",") if part)
             elif key == "physics":
                 values["physics"] = text
+            elif key == "gyro_error":
+                try:
+                    values["gyro_error"] = float(text)
+                except ValueError:
+                    raise RuntimeOptionError(option="gyro_error", runtime="sitl:",
+                                             problem=f"must be a number, got {text!r}") from None
             else:
-                raise RuntimeOptionError(option=key, runtime="sitl:", takes=("speedup", "defaults", "physics"),
+                raise RuntimeOptionError(option=key, runtime="sitl:",
+                                         takes=("speedup", "defaults", "physics", "gyro_error"),
                                          problem="not an option of a sitl: URL")
         values.update(options)
         if "binary" in values:
@@ -216,8 +233,15 @@ class SitlRuntime:
             raise RuntimeOptionError(option="physics", runtime="sitl:",
                                      problem=f"must be one of {', '.join(PHYSICS)} on the sitl: runtime, "
                                              f"got {chosen.physics!r}")
+        if not (math.isfinite(chosen.gyro_error) and chosen.gyro_error >= 0):
+            raise RuntimeOptionError(option="gyro_error", runtime="sitl:",
+                                     problem=f"must be a number >= 0, got {chosen.gyro_error:g}")
+        if chosen.gyro_error and chosen.physics != "preland":
+            raise RuntimeOptionError(option="gyro_error", runtime="sitl:",
+                                     problem="applies to preland's physics only (physics=preland)")
         return cls(options=replace(chosen, defaults=tuple(Path(p).resolve() for p in chosen.defaults),
-                                   tlog_dir=Path(chosen.tlog_dir).resolve() if chosen.tlog_dir else None))
+                                   tlog_dir=Path(chosen.tlog_dir).resolve() if chosen.tlog_dir else None,
+                                   log_dir=Path(chosen.log_dir).resolve() if chosen.log_dir else None))
 
     def fly(self, request: TrialRequest, *, tlog_name: str | None = None) -> TrialOutcome:
         return run_sitl_trial(request, options=self.options.on_this_machine(), tlog_name=tlog_name)
@@ -337,9 +361,11 @@ class SitlInstance:
     """One running SITL process (use `async with`), with its JSON bridge when the physics is preland's."""
 
     def __init__(self, *, options: SitlOptions, params: dict[str, float], home=DEFAULT_HOME,
-                 heading_deg: float = 0.0, air: AirAtVehicle | None = None) -> None:
+                 heading_deg: float = 0.0, air: AirAtVehicle | None = None,
+                 gyro_error: GyroError | None = None) -> None:
         self.options = options
         self.air = air  # preland's physics only: the air it flies in (None: still air)
+        self.gyro_error = gyro_error  # preland's physics only: the IMU's error (None: a true IMU)
         self.params = params
         self.home = home
         self.heading_deg = heading_deg
@@ -348,6 +374,7 @@ class SitlInstance:
         self.process: subprocess.Popen | None = None
         self.bridge: JsonBridge | None = None
         self.relay: MavlinkRelay | None = None  # on preland's physics: between SITL and MAVSDK (sitl_relay)
+        self.log_path: Path | None = None  # where SITL's dataflash log is kept when the trial ends (None: not)
         self._lock_file = None
         self._folder: tempfile.TemporaryDirectory | None = None
 
@@ -390,7 +417,7 @@ class SitlInstance:
         model = QuadXMultirotor(frame=QuadXFrame(), yaw_rad=math.radians(self.heading_deg))
         try:
             self.bridge = JsonBridge(model=model, port=0, packet_timeout_s=BRIDGE_PACKET_TIMEOUT_S,
-                                     air=self.air).start()
+                                     air=self.air, gyro_error=self.gyro_error).start()
         except OSError as error:
             raise SitlError(f"cannot open the JSON physics port: {error.strerror or error}") from None
         try:
@@ -493,8 +520,21 @@ class SitlInstance:
             self._lock_file.close()
             self._lock_file = None
         if self._folder is not None:
+            self._keep_log(Path(self._folder.name))
             self._folder.cleanup()
             self._folder = None
+
+
+    def _keep_log(self, folder: Path) -> None:
+        """Copy SITL's newest dataflash log (logs/*.BIN in its working folder) to `log_path`, if asked."""
+        logs = sorted((folder / "logs").glob("*.BIN"))
+        if self.log_path is None or not logs:
+            return
+        try:
+            self.log_path.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(logs[-1], self.log_path)
+        except OSError as error:  # the trial's outcome stands without its log
+            logger.warning("cannot keep SITL's log %s: %s", self.log_path, error.strerror or error)
 
 
 class BridgeTruth:
@@ -533,11 +573,16 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **rangefinder_params(mission), **wind,
               **gps.params(), **mission.params, **options.extra_params}
     air = AirAtVehicle(environment=mission.environment, seed=request.seed) if on_preland_physics else None
+    gyro_error = GyroError.for_mission(mission.environment.navigation, seed=request.seed,
+                                       per_attitude_error=options.gyro_error) if on_preland_physics else None
     async with SitlInstance(options=options, params=params, heading_deg=mission.initial_yaw_deg,
-                            air=air) as sitl:
+                            air=air, gyro_error=gyro_error) as sitl:
         tlog_path = None
+        name = tlog_name or f"{mission.name}_seed{request.seed}.tlog"
         if options.tlog_dir is not None:
-            tlog_path = str(Path(options.tlog_dir) / (tlog_name or f"{mission.name}_seed{request.seed}.tlog"))
+            tlog_path = str(Path(options.tlog_dir) / name)
+        if options.log_dir is not None:
+            sitl.log_path = Path(options.log_dir) / Path(name).with_suffix(".BIN").name
         lockstep = LockstepClock(gate=sitl.bridge.gate, unread=functools.partial(udp_receive_queue, sitl.port),
                                  relay=sitl.relay) if sitl.bridge is not None else None
         # In lock-step the GPS error moves on from the mission's start, which is at the same vehicle time

@@ -14,8 +14,8 @@ IR-LOCK reading's) until it has made that reading and sent its LANDING_TARGET: t
 past it waits. Datagrams SITL resent meanwhile (the same frame_count, after 1 s without an answer) are
 dropped once the answer leaves, so SITL gets one answer per frame and never reads a stale one later.
 
-SITL is told the model's state through `SensorSmoothing` (SITL's own smooth_sensors); `latest_state`
-stays the model's true state.
+SITL is told the model's state through `SensorSmoothing` (SITL's own smooth_sensors), its body rates
+with `gyro_error` (`sim/imu.py`) when given; `latest_state` stays the model's true state.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 from ..errors import PrelandError
 from .air import AirAtVehicle
+from .imu import GyroError
 from .multirotor import MultirotorState, QuadXMultirotor
 from .sitl_json import DEFAULT_PORT, SitlJsonError, build_reply, parse_servo_packet
 from .sensor_smoothing import SensorSmoothing
@@ -77,11 +78,13 @@ class JsonBridge:
 
     def __init__(self, *, model: QuadXMultirotor, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  packet_timeout_s: float = 30.0, send_rangefinder: bool = True,
-                 battery_voltage_v: float | None = None, air: AirAtVehicle | None = None) -> None:
+                 battery_voltage_v: float | None = None, air: AirAtVehicle | None = None,
+                 gyro_error: GyroError | None = None) -> None:
         if packet_timeout_s <= 0:
             raise ValueError("packet_timeout_s must be positive")
         self.model = model
         self.air = air  # None: still air
+        self.gyro_error = gyro_error  # None: SITL is told the true body rates
         self.packet_timeout_s = float(packet_timeout_s)
         self._send_rangefinder = send_rangefinder
         self._battery_voltage_v = battery_voltage_v
@@ -224,6 +227,8 @@ class JsonBridge:
             self._steps += 1
             self._last_frame = packet.frame_count
             told = self._smoothing.smoothed(state)
+            if self.gyro_error is not None:
+                told = self.gyro_error.applied(told, packet.dt_s)
             self._last_reply = build_reply(told, include_rangefinder=self._send_rangefinder,
                                            battery_voltage_v=self._battery_voltage_v, wind_ned_m_s=wind).encode()
             self._latest = state

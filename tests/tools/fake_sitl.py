@@ -196,6 +196,17 @@ def main(args: argparse.Namespace) -> None:
             raise CommandDenied(operation="arm", reason="Arm: Motors: Check frame class and type")
 
         simulator.autopilot.arm = refuse
+    else:
+        # SITL writes its dataflash log from arming (LOG_DISARMED 0) to logs/00000001.BIN in its folder.
+        arm = simulator.autopilot.arm
+
+        def arm_and_log(*arm_args, **arm_kwargs):
+            result = arm(*arm_args, **arm_kwargs)
+            Path("logs").mkdir(exist_ok=True)
+            _write_whole(Path("logs", "00000001.BIN"), f"stand-in dataflash log of instance {args.instance}\n")
+            return result
+
+        simulator.autopilot.arm = arm_and_log
     if log_dir:
         # Tests that stop SITL in flight wait for this file instead of guessing a wall time.
         step, airborne = simulator.step, Path(log_dir, f"{os.getpid()}.airborne")
