@@ -15,7 +15,11 @@ paced clock's (`paced_clock`) as far as SITL allows:
   the frame's time and its LANDING_TARGET is in SITL's socket before SITL's next step;
 - unlike the simulator's MAVLink face, SITL answers nothing while held: while a task waits for an answer
   (a command and its COMMAND_ACK, a parameter: `exchanging`), time runs in EXCHANGE_STEP_S steps, until
-  the answer has been read off the link; then it holds until the task has it.
+  the answer has been read off the link; then the step under way ends where it was to end, and time holds
+  until the task has the answer. Before the task goes on (`answered`), SITL stands at that step with its
+  next packet in and all it sent is taken in, so what the task sends next reaches SITL at the same vehicle
+  time and the same point of SITL's loop however fast this machine is (a request that arrives while SITL
+  runs its loop is read a loop earlier than one that arrives while SITL waits for the physics).
 
 Before the sleepers due at a hold wake, the companion takes in what SITL sent before it stopped there:
 first SITL finishes its loop (it writes out what the loop sent, then asks for the next step: the physics
@@ -96,6 +100,7 @@ class LockstepClock:
         self._exchanges = 0
         self._answered: list[Callable[[], bool]] = []  # of the exchanges running: is its answer in?
         self._undelivered: list[Callable[[], bool]] = []  # of the exchanges running: has SITL its request?
+        self._exchange_step_s = -math.inf  # where the exchange's step under way ends (vehicle s)
         self._sending = 0  # messages just handed to MAVSDK, given DELIVERY_WALL_S to leave
         self._delivery_watched = False  # a look at the undelivered requests is due (see _apply)
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
@@ -254,6 +259,30 @@ class LockstepClock:
                 self._asleep.pop(task, None)
             self._update()
 
+    async def answered(self, answered: Callable[[], bool]) -> None:
+        """In an exchange whose answer the running task has: return once this clock has read the answer off
+        the link too (`answered()`), the physics stands at the end of the step under way with SITL's next
+        packet in, and all SITL sent is taken in; each within its wall bound (the wake after is then counted
+        in `unsettled`). What the task sends next then reaches SITL while SITL waits at that step. Before
+        the clock holds anything (no task has slept on it yet: connecting), it returns at once."""
+        if self._loop is None:
+            return
+        deadline_wall_s = time.monotonic() + RELAYED_MAX_WALL_S
+        while not answered():
+            if time.monotonic() > deadline_wall_s:
+                self.unsettled += 1
+                return
+            await asyncio.sleep(SETTLE_WALL_S)
+        self._update()
+        deadline_wall_s = time.monotonic() + SITL_LOOP_MAX_WALL_S
+        while not (self._gate.waiting and self.now_s() >= self._exchange_step_s - REACHED_S):
+            if time.monotonic() > deadline_wall_s:
+                self.unsettled += 1
+                return
+            await asyncio.sleep(SETTLE_WALL_S)
+        if self._relay is not None and self.listened is not None and self._reconciled:
+            await self._take_in_relayed()
+
     def _holders(self) -> list[str]:
         return sorted(task.get_name() for task in self._participants if task not in self._asleep)
 
@@ -276,12 +305,16 @@ class LockstepClock:
             # thread; without one, a wall time passes): look again until it is, else time would stand.
             self._delivery_watched = True
             self._loop.call_later(SETTLE_WALL_S, self._delivery_look)
-        if (self._holders() or self._sending or any(answered() for answered in self._answered)
-                or undelivered):
-            # A reading is being made, a request is on its way to SITL or an answer to its task: the vehicle waits.
+        if self._holders() or self._sending or undelivered:
+            # A reading is being made or a request is on its way to SITL: the vehicle waits.
             hold_s = now_s
+        elif any(answered() for answered in self._answered):
+            # An answer is on its way to its task: the vehicle waits at the end of the step under way, the
+            # same vehicle time whenever this machine read the answer.
+            hold_s = max(now_s, self._exchange_step_s)
         elif self._exchanges:
             hold_s = wake_s = min(wake_s, now_s + EXCHANGE_STEP_S)  # told there, to step on
+            self._exchange_step_s = hold_s
         else:
             hold_s = None if math.isinf(wake_s) else wake_s
         self._gate.hold_at(hold_s)

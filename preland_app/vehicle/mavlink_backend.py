@@ -546,9 +546,15 @@ class MavlinkVehicle:
         # The stream's ACKs can come after the calls' own: an earlier call of `command` returned already, its
         # ACK not yet read on the stream, must not pass for this call's answer.
         acks_before = max(self._final_acks_read.get(command, 0), self._acks_returned.get(command, 0))
-        with self._exchanging(answered=lambda: self._final_acks_read.get(command, 0) > acks_before,
-                              sends=f"COMMAND_LONG:{command}"):
-            return await self._command_now(command, *params, operation=operation, check=check)
+
+        def answered() -> bool:
+            return self._final_acks_read.get(command, 0) > acks_before
+
+        with self._exchanging(answered=answered, sends=f"COMMAND_LONG:{command}"):
+            number = await self._command_now(command, *params, operation=operation, check=check)
+            if self._lockstep is not None:
+                await self._lockstep.answered(answered)
+            return number
 
     async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
@@ -655,14 +661,23 @@ class MavlinkVehicle:
     async def _param_exchange(self, name: str, *, operation: str, send: dict[str, Any] | None) -> tuple[float, int]:
         """Send PARAM_SET (`send`) or PARAM_REQUEST_READ and wait for the PARAM_VALUE of `name` that answers it:
         (value, MAV_PARAM_TYPE). ArduPilot answers nothing for a name it lacks."""
-        with self._exchanging():
-            return await self._param_exchange_now(name, operation=operation, send=send)
+        asked = [self._param_receipts]  # the PARAM_VALUEs received before the newest request
 
-    async def _param_exchange_now(self, name: str, *, operation: str,
-                                  send: dict[str, Any] | None) -> tuple[float, int]:
+        def answered() -> bool:
+            answer = self._param_values.get(name)
+            return answer is not None and answer[2] > asked[0]
+
+        with self._exchanging(answered=answered):
+            value = await self._param_exchange_now(name, operation=operation, send=send, asked=asked)
+            if self._lockstep is not None:
+                await self._lockstep.answered(answered)
+            return value
+
+    async def _param_exchange_now(self, name: str, *, operation: str, send: dict[str, Any] | None,
+                                  asked: list[int]) -> tuple[float, int]:
         for _ in range(PARAM_TRIES):
             self._check_link(operation)
-            seen = self._param_receipts
+            seen = asked[0] = self._param_receipts
             if send is None:
                 await self._send("PARAM_REQUEST_READ", {"param_id": name, "param_index": -1})
             else:
