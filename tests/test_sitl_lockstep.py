@@ -312,3 +312,73 @@ def test_a_wake_takes_in_what_sitl_sent_in_the_loop_of_its_step_however_slow_tha
     _run_on_played_bridge(main, bridge=bridge, player=slow_sitl)
     assert len(seen) == 20
     assert all(messages == steps for messages, steps in seen), seen
+
+
+def test_an_answer_read_mid_step_ends_the_step_where_it_was_to_and_the_task_goes_on_once_sitl_stands_there(
+        monkeypatch):
+    """A request that reaches SITL while SITL runs its loop is read a loop earlier than one that reaches it
+    while SITL waits for the physics: so an exchange's task goes on only once the physics stands at the end
+    of the step under way (not wherever this machine read the answer) with SITL's next packet in."""
+    import preland_app.vehicle.lockstep_clock as lockstep_clock
+
+    monkeypatch.setattr(lockstep_clock, "EXCHANGE_DELIVERY_WALL_S", 0.0)
+    slow, permits = threading.Event(), threading.Semaphore(0)
+    frame_s = 1.0 / FRAME_RATE_HZ
+    pwm = [round(QuadXFrame().hover_pwm_us()) - 50] * 4 + [0] * 12
+
+    def player(bridge: JsonBridge, stop: threading.Event) -> threading.Thread:
+        def run() -> None:  # free-running SITL until `slow`, then one servo packet per permit
+            frame = 0
+            while not stop.is_set():
+                if slow.is_set() and not permits.acquire(timeout=0.05):
+                    continue
+                bridge.handle(build_servo_packet(frame_rate_hz=FRAME_RATE_HZ, frame_count=frame, pwm_us=pwm))
+                frame += 1
+
+        thread = threading.Thread(target=run, name="sitl-stand-in", daemon=True)
+        thread.start()
+        return thread
+
+    seen: dict[str, object] = {}
+
+    async def main(bridge: JsonBridge) -> None:
+        clock = LockstepClock(gate=bridge.gate, stall_wall_s=30.0)
+        answer_in = False
+
+        async def mission() -> None:
+            await clock.sleep(0.5)
+
+        async def commander() -> None:
+            nonlocal answer_in
+            await clock.sleep(0.1)
+            slow.set()
+            permits.release()  # the packet the physics stands at: taken in once it is let go
+            with clock.exchanging(answered=lambda: answer_in):
+                start_s = clock.now_s()
+                await until_async(lambda: bridge.gate.hold_at_s is not None and bridge.gate.hold_at_s > start_s,
+                                  timeout_s=30, what="the exchange's step to be let go")
+                step_end_s = bridge.gate.hold_at_s
+                permits.release()
+                await until_async(lambda: clock.now_s() > start_s, timeout_s=30, what="one frame of the step")
+                answer_in = True  # read off the link in the middle of the step
+                clock._apply()  # the hold, as the clock's next look sets it
+                seen["hold_after_answer_s"] = bridge.gate.hold_at_s
+                went_on = asyncio.ensure_future(clock.answered(lambda: answer_in))
+                seen["went_on_mid_step"] = went_on.done()
+                for _ in range(10):  # SITL asks for more steps than the step has
+                    permits.release()
+                await asyncio.wait_for(went_on, timeout=30)
+                seen["went_on_at_s"] = clock.now_s()
+                seen["sitl_waiting"] = bridge.gate.waiting
+                seen["start_s"], seen["step_end_s"] = start_s, step_end_s
+            slow.clear()  # SITL runs free again: the mission's sleep ends
+
+        await asyncio.gather(mission(), commander())
+
+    bridge = _run_on_played_bridge(main, player=player)
+    assert seen["step_end_s"] == seen["start_s"] + lockstep_clock.EXCHANGE_STEP_S
+    assert seen["hold_after_answer_s"] == seen["step_end_s"]  # not the mid-step time the answer was read at
+    assert seen["went_on_mid_step"] is False
+    assert seen["step_end_s"] <= seen["went_on_at_s"] < seen["step_end_s"] + frame_s + 1e-9
+    assert seen["sitl_waiting"] is True
+    assert bridge.counters.steps > 0
