@@ -46,6 +46,7 @@ import socket
 import subprocess
 import tempfile
 from dataclasses import dataclass, field, replace
+from collections.abc import Callable
 from typing import Any, ClassVar
 from pathlib import Path
 
@@ -178,6 +179,15 @@ class SitlOptions:
 SPEEDUP_RANGE = (0.1, 1000.0)
 
 
+_URL_OPTIONS: dict[str, Callable[[str], Any]] = {
+    "speedup": float,
+    "defaults": lambda text: tuple(Path(part) for part in text.split(",") if part),
+    "physics": str,
+    "gyro_error": float,
+}
+"""The query options of a `sitl:` URL and how each is read from its text (ValueError: not a number)."""
+
+
 @dataclass(frozen=True)
 class SitlRuntime:
     """ArduPilot SITL (`sitl:PATH`, `sitl:` for $PRELAND_SITL_BINARY; query `speedup=X`,
@@ -200,26 +210,15 @@ class SitlRuntime:
     def from_url(cls, *, target: str, query: dict[str, str], options: dict[str, Any]) -> "SitlRuntime":
         values: dict[str, Any] = {}
         for key, text in query.items():
-            if key == "speedup":
-                try:
-                    values["speedup"] = float(text)
-                except ValueError:
-                    raise RuntimeOptionError(option="speedup", runtime="sitl:",
-                                             problem=f"must be a number, got {text!r}") from None
-            elif key == "defaults":
-                values["defaults"] = tuple(Path(part) for part in text.split(",") if part)
-            elif key == "physics":
-                values["physics"] = text
-            elif key == "gyro_error":
-                try:
-                    values["gyro_error"] = float(text)
-                except ValueError:
-                    raise RuntimeOptionError(option="gyro_error", runtime="sitl:",
-                                             problem=f"must be a number, got {text!r}") from None
-            else:
-                raise RuntimeOptionError(option=key, runtime="sitl:",
-                                         takes=("speedup", "defaults", "physics", "gyro_error"),
+            read = _URL_OPTIONS.get(key)
+            if read is None:
+                raise RuntimeOptionError(option=key, runtime="sitl:", takes=tuple(_URL_OPTIONS),
                                          problem="not an option of a sitl: URL")
+            try:
+                values[key] = read(text)
+            except ValueError:
+                raise RuntimeOptionError(option=key, runtime="sitl:",
+                                         problem=f"must be a number, got {text!r}") from None
         values.update(options)
         if "binary" in values:
             raise RuntimeOptionError(option="binary", runtime="sitl:", problem="the binary is the URL's path "
