@@ -16,7 +16,7 @@ from preland_app.cli import app
 from preland_app.runtime.base import RuntimeOptionError, RuntimeUrlError, open_runtime, split_url
 from preland_app.runtime.embedded import EmbeddedRuntime
 from preland_app.runtime.mavlink import MavlinkRuntime
-from preland_app.runtime.sitl import SitlRuntime
+from preland_app.runtime.sitl import SitlOptions, SitlRuntime
 
 from .conftest import THESIS_MISSION
 from .test_mavlink_runtime import ServedSimulator
@@ -277,3 +277,5 @@ def test_the_gyro_error_is_a_sitl_option_of_preland_physics_only(tmp_path):
         open_runtime(f"sitl:{tmp_path}/arducopter?physics=preland&gyro_error=-1")
     with pytest.raises(RuntimeOptionError, match="gyro_error: does not apply to the sim: runtime"):
         open_runtime("sim:", {"gyro_error": 0.43})
+    with pytest.raises(RuntimeOptionError, match="gyro_error: applies to preland's physics only"):
+        SitlOptions(binary=None, gyro_error=0.43)  # the Python API checks as the URL does

@@ -21,8 +21,8 @@ step, to a `JsonBridge` serving from a thread of the trial's process on a port o
 sitl_json_quadx.parm) follow the copter defaults. On preland's physics the air is the embedded
 simulator's (`sim/air.py`: the scenario's wind, Dryden gusts and rotor wash from the trial seed's
 streams), sent to SITL as `velocity_wind`; SITL's own SIM_WIND_* blow only on its own physics and are
-not set. The body rates SITL's IMU reads carry the mission's attitude error as a gyro error (`sim/imu.py`).
-The bridge is stopped with its SITL.
+not set. With `gyro_error`, the body rates SITL's IMU reads carry a gyro error scaled from the mission's
+attitude error (`sim/imu.py`). The bridge is stopped with its SITL.
 
 On preland's physics the trial runs in lock-step with it (`vehicle.lockstep_clock`): the companion's
 clock is the physics' time, each camera frame and IR-LOCK reading shows the physics' state at its own
@@ -45,8 +45,8 @@ import signal
 import socket
 import subprocess
 import tempfile
-from dataclasses import dataclass, field, replace
 from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 from pathlib import Path
 
@@ -155,6 +155,14 @@ class SitlOptions:
     physics: str = "ardupilot"
     gyro_error: float = 0.0
 
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.gyro_error) and self.gyro_error >= 0):
+            raise RuntimeOptionError(option="gyro_error", runtime="sitl:",
+                                     problem=f"must be a number >= 0, got {self.gyro_error:g}")
+        if self.gyro_error and self.physics != "preland":
+            raise RuntimeOptionError(option="gyro_error", runtime="sitl:",
+                                     problem="applies to preland's physics only (physics=preland)")
+
     def speedup_for(self, *, uses_camera: bool) -> float:
         """The --speedup of a trial whose land mode does (or does not) read camera frames; on preland's
         physics, in lock-step, SPEEDUP_LOCKSTEP whatever the land mode."""
@@ -232,12 +240,6 @@ class SitlRuntime:
             raise RuntimeOptionError(option="physics", runtime="sitl:",
                                      problem=f"must be one of {', '.join(PHYSICS)} on the sitl: runtime, "
                                              f"got {chosen.physics!r}")
-        if not (math.isfinite(chosen.gyro_error) and chosen.gyro_error >= 0):
-            raise RuntimeOptionError(option="gyro_error", runtime="sitl:",
-                                     problem=f"must be a number >= 0, got {chosen.gyro_error:g}")
-        if chosen.gyro_error and chosen.physics != "preland":
-            raise RuntimeOptionError(option="gyro_error", runtime="sitl:",
-                                     problem="applies to preland's physics only (physics=preland)")
         return cls(options=replace(chosen, defaults=tuple(Path(p).resolve() for p in chosen.defaults),
                                    tlog_dir=Path(chosen.tlog_dir).resolve() if chosen.tlog_dir else None,
                                    log_dir=Path(chosen.log_dir).resolve() if chosen.log_dir else None))
