@@ -265,23 +265,25 @@ class LockstepClock:
         packet in, and all SITL sent is taken in; each within its wall bound (the wake after is then counted
         in `unsettled`). What the task sends next then reaches SITL while SITL waits at that step. Before
         the clock holds anything (no task has slept on it yet: connecting), it returns at once."""
-        if self._loop is None:
+        if self._loop is None or not await self._until(answered, bound_wall_s=RELAYED_MAX_WALL_S):
             return
-        deadline_wall_s = time.monotonic() + RELAYED_MAX_WALL_S
-        while not answered():
-            if time.monotonic() > deadline_wall_s:
-                self.unsettled += 1
-                return
-            await asyncio.sleep(SETTLE_WALL_S)
         self._update()
-        deadline_wall_s = time.monotonic() + SITL_LOOP_MAX_WALL_S
-        while not (self._gate.waiting and self.now_s() >= self._exchange_step_s - REACHED_S):
-            if time.monotonic() > deadline_wall_s:
-                self.unsettled += 1
-                return
-            await asyncio.sleep(SETTLE_WALL_S)
+        if not await self._until(lambda: self._gate.waiting and self.now_s() >= self._exchange_step_s - REACHED_S,
+                                 bound_wall_s=SITL_LOOP_MAX_WALL_S):
+            return
         if self._relay is not None and self.listened is not None and self._reconciled:
             await self._take_in_relayed()
+
+    async def _until(self, condition: Callable[[], bool], *, bound_wall_s: float) -> bool:
+        """Wait until `condition()`, looking every SETTLE_WALL_S; False (counted in `unsettled`) when
+        `bound_wall_s` passed first."""
+        deadline_wall_s = time.monotonic() + bound_wall_s
+        while not condition():
+            if time.monotonic() > deadline_wall_s:
+                self.unsettled += 1
+                return False
+            await asyncio.sleep(SETTLE_WALL_S)
+        return True
 
     def _holders(self) -> list[str]:
         return sorted(task.get_name() for task in self._participants if task not in self._asleep)
@@ -351,13 +353,8 @@ class LockstepClock:
             # SITL writes out what a loop sent before it asks for its next step (HAL_SITL: the loop, then
             # the serial ports' ticks, then the next servo packet): once the physics stands at the hold
             # with that packet, everything SITL sent up to this time is on its way here.
-            sitl_deadline_wall_s = started_wall_s + SITL_LOOP_MAX_WALL_S
             self.waiting_for_sitl = True
-            while not self._gate.waiting:
-                if time.monotonic() > sitl_deadline_wall_s:
-                    self.unsettled += 1
-                    break
-                await asyncio.sleep(SETTLE_WALL_S)
+            await self._until(lambda: self._gate.waiting, bound_wall_s=SITL_LOOP_MAX_WALL_S)
             self.waiting_for_sitl = False
             if self._relay is not None and self.listened is not None and self._reconciled:
                 await self._take_in_relayed()
