@@ -385,3 +385,43 @@ def test_a_paced_command_answered_late_in_wall_time_reaches_the_vehicle_once(sho
     outcome = _fly_irlock_paced_then_stop(served, short_mission, seed=3)
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert modes_received == [FlightMode.GUIDED, FlightMode.LAND]
+
+
+def test_every_ack_a_command_call_returns_is_read_on_the_message_stream_too(thesis_mission, monkeypatch):
+    """MAVSDK's message stream goes live some time after it is subscribed to (seconds, on a loaded machine).
+    A command sent before then has its ACK returned to the call but never shown on the stream; in lock-step
+    every later command of that kind then waited in vain for its ACK there while SITL's time ran on (a trial
+    lost its link). Here the stream misses the first messages after subscribing: the connection sends no
+    request until the stream delivers, so each ACK returned is read on the stream as well."""
+    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
+
+    missed_first = 3
+    subscribe = MavlinkDirectAsync.subscribe_message
+
+    async def live_late(self, name):
+        seen = 0
+        async for message in subscribe(self, name):
+            seen += 1
+            if seen > missed_first:
+                yield message
+
+    monkeypatch.setattr(MavlinkDirectAsync, "subscribe_message", live_late)
+    served = ServedSimulator(thesis_mission, seed=1, speedup=SPEEDUP)
+
+    async def main():
+        vehicle = MavlinkVehicle(url=served.url)
+        await vehicle.connect()
+        try:
+            await until_async(lambda: vehicle._final_acks_read == vehicle._acks_returned, timeout_s=PATIENCE_S,
+                              what="the stream to show every ACK the command calls returned")
+            return dict(vehicle._acks_returned)
+        finally:
+            await vehicle.close()
+
+    try:
+        returned = asyncio.run(main())
+    finally:
+        served.stop()
+    assert returned.get(511, 0) >= 9  # every stream asked for, each ACK seen on both

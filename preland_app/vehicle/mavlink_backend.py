@@ -262,6 +262,13 @@ class MavlinkVehicle:
         self._background(self._listen(), "listen")
         self._background(self._tick(), "tick")
         deadline = time.monotonic() + self.connect_timeout_s
+        # No request before MAVSDK's message stream delivers: an answer sent before the subscription is live
+        # (later than the call, on a loaded machine) is returned to its call but never read on the stream,
+        # and the two counts of a command's ACKs would differ for the rest of the link (`_command`).
+        while not self._received:
+            if time.monotonic() > deadline:
+                raise LinkLost(operation="connect", reason="MAVSDK's message stream delivered nothing")
+            await asyncio.sleep(0.01)
         # Paced, the simulator may hold at time 0 (sim serve --paced): its HEARTBEAT is enough.
         while not (self._clock.settled or self.paced) or "HEARTBEAT" not in self._messages:
             if time.monotonic() > deadline:
