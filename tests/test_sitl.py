@@ -17,8 +17,10 @@ from preland_app.cli import app
 from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
 from preland_app.runtime.sitl import SITL_ENV, SitlOptions, run_sitl_trial
+from preland_app.vehicle.lockstep_clock import MISSION_START_S
 
 from .conftest import ROOT, THESIS_MISSION
+from .tools.fake_sitl import FRAME_RATE_HZ
 from .tools.terminal import as_from_a_terminal
 from .waiting import until
 
@@ -309,6 +311,14 @@ def test_a_trial_on_preland_physics_runs_sitl_on_the_json_bridge(fake_sitl, thes
     # The stand-in waits for an answer to every servo packet: it flew on answers from the bridge.
     answered = _answers(logs, launch)
     assert answered > 100 and outcome.details["sitl_json_packets"] >= answered
+    # From the mission on, the ground station's HEARTBEAT reaches SITL once each whole vehicle second (the
+    # companion's, in vehicle time), none between (MAVSDK's own, sent each wall second, are held back).
+    heard_s = [float(line.split()[0]) for line in (logs / f"{launch['pid']}.heartbeats").read_text().splitlines()]
+    in_mission_s = [t for t in heard_s if t >= MISSION_START_S + 1 - 1e-6]
+    assert len(in_mission_s) >= 20
+    assert [math.floor(t + 1e-6) for t in in_mission_s] == list(range(16, 16 + len(in_mission_s)))
+    # (read within the stand-in's next two physics frames, as it steps on from the held time)
+    assert all(t - math.floor(t + 1e-6) < 2.5 / FRAME_RATE_HZ for t in in_mission_s), in_mission_s
     assert not _alive(launch["pid"]) and _children() == []
     assert _bridge_threads() == []
 

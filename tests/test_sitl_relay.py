@@ -52,3 +52,42 @@ def test_the_relay_passes_frames_both_ways_and_counts_them():
         relay.stop()
         mavsdk.close()
         sitl.close()
+
+
+def test_a_gated_message_reaches_sitl_only_as_admitted():
+    mavsdk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    mavsdk.bind(("127.0.0.1", 0))
+    mavsdk.settimeout(10.0)
+    sitl = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sitl.settimeout(10.0)
+    relay = MavlinkRelay(mavsdk_port=mavsdk.getsockname()[1]).start()
+    try:
+        vehicle, companion = _encoder(1), _encoder(1)
+        sitl.sendto(vehicle.heartbeat_encode(2, 3, 0, 4, 0).pack(vehicle), ("127.0.0.1", relay.sitl_port))
+        _, relay_address = mavsdk.recvfrom(65536)
+
+        def heartbeat() -> bytes:
+            return companion.heartbeat_encode(18, 8, 0, 0, 0).pack(companion)
+
+        mavsdk.sendto(heartbeat(), relay_address)  # not gated yet: passed
+        assert frame_keys(sitl.recvfrom(65536)[0], NAMES) == ["HEARTBEAT"]
+        until(lambda: relay.to_sitl["HEARTBEAT"] == 1, timeout_s=10.0, what="the relay to count the heartbeat")
+        assert relay.gate("HEARTBEAT") == 1  # how many passed before
+        target = companion.landing_target_encode(0, 0, 8, 0.1, -0.2, 5.0, 0.0, 0.0).pack(companion)
+        mavsdk.sendto(heartbeat(), relay_address)  # MAVSDK's own: held back
+        mavsdk.sendto(heartbeat() + target, relay_address)  # held back, the target in the same datagram passed
+        assert sitl.recvfrom(65536)[0] == target
+        relay.allow("HEARTBEAT")
+        admitted = heartbeat()
+        mavsdk.sendto(admitted, relay_address)
+        assert sitl.recvfrom(65536)[0] == admitted
+        until(lambda: relay.to_sitl["HEARTBEAT"] == 2, timeout_s=10.0, what="the relay to count the admitted one")
+        relay.allow("LANDING_TARGET")  # not gated: nothing changes
+        mavsdk.sendto(target, relay_address)
+        assert sitl.recvfrom(65536)[0] == target
+        until(lambda: relay.to_sitl["LANDING_TARGET"] == 2, timeout_s=10.0, what="the relay to count the target")
+        assert relay.held_back == {"HEARTBEAT": 2} and relay.to_sitl == {"HEARTBEAT": 2, "LANDING_TARGET": 2}
+    finally:
+        relay.stop()
+        mavsdk.close()
+        sitl.close()

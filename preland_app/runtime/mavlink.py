@@ -107,6 +107,7 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     if lockstep is not None:
         connected_s = await lockstep.start_at()
         await vehicle.restart_streams()  # on a schedule from the mission's start, the same in every trial
+        vehicle.keep_heartbeat_in_vehicle_time()
     truth_source = None
     if truth:
         truth_source = SimStateTruth(vehicle)

@@ -6,6 +6,11 @@ MAVSDK receives and sends on threads of its own, where neither can be seen; the 
 sockets, sees both. A frame is counted under its message name, a COMMAND_LONG under
 `COMMAND_LONG:<command>` (MAVSDK sends commands of its own too). SITL sends to `sitl_port`; the relay
 passes what comes to MAVSDK's port, and MAVSDK's answers (to the relay's address) back to SITL.
+
+A message MAVSDK also sends on a wall-clock timer of its own (its HEARTBEAT each wall second) reaches SITL at
+whatever vehicle time this machine's speed gives. Once `gate(key)` is called, the relay passes a frame of
+`key` from MAVSDK only as `allow(key)` admits one (the companion sends its own at vehicle times) and drops
+the others.
 """
 
 from __future__ import annotations
@@ -31,7 +36,12 @@ def _names() -> dict[int, str]:
 
 def frame_keys(data: bytes, names: dict[int, str]) -> list[str]:
     """The keys of the MAVLink 1 and 2 frames in one datagram, in order (a message id without a name: `#id`)."""
-    keys, index = [], 0
+    return [key for key, _, _ in frame_spans(data, names)]
+
+
+def frame_spans(data: bytes, names: dict[int, str]) -> list[tuple[str, int, int]]:
+    """(key, start, end) of each MAVLink 1 and 2 frame in one datagram, in order (see `frame_keys`)."""
+    spans, index = [], 0
     while index + 8 <= len(data):
         magic, length = data[index], data[index + 1]
         if magic == MAGIC_V2:  # MAVLink 2: incompat, compat, seq, sysid, compid, 3-byte id; 13 more bytes if signed
@@ -46,9 +56,9 @@ def frame_keys(data: bytes, names: dict[int, str]) -> list[str]:
         if message_id == _COMMAND_LONG:
             body = data[payload:payload + length].ljust(_COMMAND_OFFSET + 2, b"\0")  # MAVLink 2 trims zeros
             key = f"COMMAND_LONG:{struct.unpack_from('<H', body, _COMMAND_OFFSET)[0]}"
-        keys.append(key)
+        spans.append((key, index, end))
         index = end
-    return keys
+    return spans
 
 
 class MavlinkRelay:
@@ -66,6 +76,9 @@ class MavlinkRelay:
         self._sitl_address: tuple[str, int] | None = None
         self.from_sitl: collections.Counter[str] = collections.Counter()
         self.to_sitl: collections.Counter[str] = collections.Counter()
+        self.held_back: collections.Counter[str] = collections.Counter()  # MAVSDK's frames of gated keys dropped
+        self._allowed: dict[str, int] = {}  # gated key -> frames of it still admitted
+        self._lock = threading.Lock()
         self._passing = False  # a datagram is read and not yet counted and passed on
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="preland-sitl-relay", daemon=True)
@@ -80,6 +93,37 @@ class MavlinkRelay:
             self._thread.join(timeout=2 * _POLL_WALL_S)
         self._sitl.close()
         self._mavsdk.close()
+
+    def gate(self, key: str) -> int:
+        """From now on, pass MAVSDK's frames of `key` to SITL only as `allow` admits them; returns how many
+        were passed before."""
+        with self._lock:
+            self._allowed.setdefault(key, 0)
+            return self.to_sitl[key]
+
+    def allow(self, key: str) -> None:
+        """Admit the next frame of gated `key` from MAVSDK (nothing for a key not gated)."""
+        with self._lock:
+            if key in self._allowed:
+                self._allowed[key] += 1
+
+    def _to_sitl(self, data: bytes) -> None:
+        """Pass MAVSDK's `data` on without the frames of gated keys not admitted, and count what passed (under
+        the lock, so `gate` counts a frame being passed as it is gated)."""
+        with self._lock:
+            spans = frame_spans(data, self._names)
+            kept = []
+            for key, start, end in spans:
+                if key in self._allowed:
+                    if not self._allowed[key]:
+                        self.held_back[key] += 1
+                        continue
+                    self._allowed[key] -= 1
+                kept.append((key, data[start:end]))
+            if kept:
+                self._sitl.sendto(data if len(kept) == len(spans) else b"".join(frame for _, frame in kept),
+                                  self._sitl_address)
+                self.to_sitl.update(key for key, _ in kept)  # counted once SITL's socket has it
 
     def idle(self) -> bool:
         """Nothing from SITL is waiting in the relay's socket or being passed on."""
@@ -102,14 +146,12 @@ class MavlinkRelay:
                 self._passing = True
                 try:
                     data, address = sock.recvfrom(65536)
-                    keys = frame_keys(data, self._names)
                     if sock is self._sitl:
                         self._sitl_address = address
                         self._mavsdk.sendto(data, ("127.0.0.1", self.mavsdk_port))
-                        self.from_sitl.update(keys)  # counted once MAVSDK's socket has it
+                        self.from_sitl.update(frame_keys(data, self._names))  # counted once MAVSDK's socket has it
                     elif self._sitl_address is not None:
-                        self._sitl.sendto(data, self._sitl_address)
-                        self.to_sitl.update(keys)  # counted once SITL's socket has it
+                        self._to_sitl(data)
                 except OSError:
                     pass  # a closed socket (stopping), or a peer not there yet: UDP drops it as the link would
                 finally:

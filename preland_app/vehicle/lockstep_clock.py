@@ -108,6 +108,7 @@ class LockstepClock:
         self.listened: collections.Counter[str] | None = None  # the vehicle's messages taken in, by name
         self.taken_in: frozenset[str] = frozenset()  # the names a wake counts (MAVSDK passes on those it knows)
         self._handed: collections.Counter[str] = collections.Counter()  # to MAVSDK, by the relay's key
+        self._gated: set[str] = set()  # keys the relay passes only as handed here (`gate`)
         self._forgiven: collections.Counter[str] = collections.Counter()  # relayed, never taken in
         self._reconciled = False  # the counts above compared once after a quiet wake (see _settle_then_wake)
         self._settling = False
@@ -197,12 +198,24 @@ class LockstepClock:
         """An exchange that needs no answer (a LANDING_TARGET sent): the physics keeps holding for it."""
         yield
 
+    def gate(self, key: str) -> bool:
+        """From now on, the messages `key` that reach SITL are those handed over here (`handing`), at the
+        vehicle times they are handed, not those MAVSDK sends of its own on a wall-clock timer (the relay
+        drops these; see `runtime.sitl_relay`). False without a relay (nothing gated)."""
+        if self._relay is None:
+            return False
+        self._handed[key] = self._relay.gate(key)
+        self._gated.add(key)
+        return True
+
     def handing(self, key: str) -> Callable[[], bool] | None:
         """Before a message is handed to MAVSDK: whether it has reached SITL's socket, by the relay's count
         of `key` (see `runtime.sitl_relay`); None without a relay."""
         if self._relay is None:
             return None
         self._handed[key] += 1
+        if key in self._gated:
+            self._relay.allow(key)
         wanted, relayed = self._handed[key], self._relay.to_sitl
         return lambda: relayed[key] >= wanted
 

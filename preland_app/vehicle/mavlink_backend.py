@@ -69,6 +69,10 @@ _LANDED = {0: LandedState.UNDEFINED, 1: LandedState.ON_GROUND, 2: LandedState.IN
            4: LandedState.LANDING}
 STREAMS_HZ = {"HEARTBEAT": 10, "GLOBAL_POSITION_INT": 10, "LOCAL_POSITION_NED": 10, "ATTITUDE": 10, "EXTENDED_SYS_STATE": 5,
               "SYS_STATUS": 2, "GPS_RAW_INT": 2, "HOME_POSITION": 1, "DISTANCE_SENSOR": 10}
+# The HEARTBEAT MAVSDK sends as a companion computer (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID), sent by
+# the vehicle itself in lock-step (`keep_heartbeat_in_vehicle_time`).
+COMPANION_HEARTBEAT = {"type": 18, "autopilot": 8, "base_mode": 0, "custom_mode": 0, "system_status": 0,
+                       "mavlink_version": 3}
 # What the vehicle reads of what the autopilot sends: its streams and the answers to requests (a lock-step clock
 # counts these before a wake).
 READ_MESSAGES = frozenset(STREAMS_HZ) | {"COMMAND_ACK", "PARAM_VALUE", "STATUSTEXT"}
@@ -354,6 +358,22 @@ class MavlinkVehicle:
         first set (GCS_MAVLINK::set_ap_message_interval), so its messages then come at vehicle times counted
         from now, not from when the connection's requests happened to arrive."""
         await self._request_streams(restart=True)
+
+    def keep_heartbeat_in_vehicle_time(self) -> None:
+        """In lock-step with SITL: from now on, the companion's HEARTBEAT reaches SITL at each whole vehicle
+        second. MAVSDK sends its own each wall second, which reach SITL at whatever vehicle time this
+        machine's speed gives (and the same seed then landed a few millimetres apart); the relay drops
+        those (`LockstepClock.gate`). SITL still hears a ground station once a second, as a GCS failsafe
+        (FS_GCS_ENABLE) needs."""
+        if self._lockstep is not None and self._lockstep.gate("HEARTBEAT"):
+            self._background(self._heartbeats(), "heartbeat")
+
+    async def _heartbeats(self) -> None:
+        clock = self._lockstep
+        while True:
+            now_s = clock.now_s()
+            await clock.sleep(math.floor(now_s + 1e-9) + 1.0 - now_s)
+            await self._send_now("HEARTBEAT", COMPANION_HEARTBEAT, targeted=False)
 
     async def _request_streams(self, *, restart: bool = False) -> None:
         streams = dict(STREAMS_HZ)

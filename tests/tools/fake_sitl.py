@@ -152,9 +152,16 @@ def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | N
 class SitlFace(MavlinkFace):
     """The face plus SITL's own SIM_* parameters, as a SITL build has them (REAL32)."""
 
-    def __init__(self, *, sim_values: dict[str, float], **kwargs) -> None:
+    def __init__(self, *, sim_values: dict[str, float], heartbeat_log: Path | None = None, **kwargs) -> None:
         super().__init__(**kwargs)
         self.sim_values = {name: sim_values.get(name, 0.0) for name in SITL_FLOAT_PARAMS}
+        self.heartbeat_log = heartbeat_log
+
+    def _on_heartbeat(self, message) -> None:
+        """Note the physics time each ground station's HEARTBEAT is read at (a test checks when they come)."""
+        if self.heartbeat_log is not None:
+            with self.heartbeat_log.open("a", encoding="ascii") as log:
+                log.write(f"{self.simulator.time_s:.4f} {message.get_srcComponent()}\n")
 
     def _sim_value(self, name: str) -> None:
         self.mav.param_value_send(name.encode("ascii"), self.sim_values[name], 9, len(self._param_names), 65535)
@@ -228,7 +235,8 @@ def main(args: argparse.Namespace) -> None:
         threading.Thread(target=serve_json_physics, daemon=True,
                          kwargs={"host": host, "port": port, "speedup": args.speedup, "log_dir": log_dir,
                                  "physics_time": clock}).start()
-    face = SitlFace(simulator=simulator, clock=clock, listen=args.serial0, sim_values=given)
+    face = SitlFace(simulator=simulator, clock=clock, listen=args.serial0, sim_values=given,
+                    heartbeat_log=Path(log_dir, f"{os.getpid()}.heartbeats") if log_dir else None)
     asyncio.run(face.run())
 
 
