@@ -232,7 +232,8 @@ def test_a_heartbeat_sent_before_a_mode_change_but_read_after_its_ack_is_no_take
     change can arrive after its ACK (seen at 20x as a false "pilot takeover: mode STABILIZE"). They do not
     count; a mode the vehicle really keeps, or a change after the confirmation, does."""
     from preland_app.field.takeover import GuardedVehicle, PilotTakeover
-    from preland_app.vehicle.mavlink_backend import COMMANDED_STATE_GRACE_S, MavlinkVehicle
+    from preland_app.vehicle.commanded_state import COMMANDED_STATE_GRACE_S
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
 
     vehicle = MavlinkVehicle(url="udp://:14550")
     clock = _SteppedClock()
@@ -296,8 +297,8 @@ def test_a_heartbeat_read_after_its_commands_ack_on_the_message_stream_is_believ
     change's ACK there are of the old state however far the clock has run (a backlog of many vehicle seconds
     at 20x), and the first one read after it tells the truth, so a real takeover is seen at once."""
     from preland_app.field.takeover import GuardedVehicle, PilotTakeover
-    from preland_app.vehicle.mavlink_backend import (COMMANDED_STATE_GRACE_S, COMMANDED_STATE_LIMIT_S,
-                                                     MAV_CMD_DO_SET_MODE, MavlinkVehicle)
+    from preland_app.vehicle.commanded_state import COMMANDED_STATE_GRACE_S, COMMANDED_STATE_LIMIT_S
+    from preland_app.vehicle.mavlink_backend import MAV_CMD_DO_SET_MODE, MavlinkVehicle
 
     vehicle = MavlinkVehicle(url="udp://:14550")
     clock = _SteppedClock()

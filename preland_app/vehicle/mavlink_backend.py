@@ -28,11 +28,11 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 from ..mavlink.dialect import xml_text
 from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
+from .commanded_state import Commanded, heartbeat_armed, heartbeat_mode
 from .lockstep_clock import EXCHANGE_STEP_S, LockstepClock
 from .mavsdk_support import (DaemonCallExecutor, mavsdk_connection_url, quiet_mavsdk_logs,
                              set_command_resend_wall_s)
@@ -76,16 +76,6 @@ COMPANION_HEARTBEAT = {"type": 18, "autopilot": 8, "base_mode": 0, "custom_mode"
 # What the vehicle reads of what the autopilot sends: its streams and the answers to requests (a lock-step clock
 # counts these before a wake).
 READ_MESSAGES = frozenset(STREAMS_HZ) | {"COMMAND_ACK", "PARAM_VALUE", "STATUSTEXT"}
-# HEARTBEAT arrives on MAVSDK's message stream, COMMAND_ACK on the command call's own: a HEARTBEAT sent
-# before an accepted mode change or arm/disarm can reach preland after that command's ACK (a backlog of the
-# message stream on a loaded machine holds seconds of vehicle time at 20x). The message stream carries the
-# COMMAND_ACK too, in the order the vehicle sent it: a HEARTBEAT read after it there was sent after the change.
-# So the commanded state stands until a HEARTBEAT reports it or one is read after its ACK on the stream. Where
-# the stream shows no COMMAND_ACK at all, it stands for COMMANDED_STATE_GRACE_S vehicle seconds after the ACK
-# (heartbeats come at 1 to 10 Hz, so any later one was sent after the change); and an ACK the stream never
-# shows is waited for COMMANDED_STATE_LIMIT_S at most.
-COMMANDED_STATE_GRACE_S = 5.0
-COMMANDED_STATE_LIMIT_S = 30.0
 # A vehicle that sends nothing at all (no stamped message either) has its silence reckoned from wall time,
 # so at 8x the 5 vehicle s of link_timeout_s would be 0.6 wall s, and a stall of either process (a loaded
 # machine, a garbage collection) would read as a lost link. Such a link is lost only after this much wall time
@@ -115,44 +105,6 @@ FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
 LOCAL_COMMAND_RESEND_WALL_S = 5.0
 MESSAGE_IDS = {"HEARTBEAT": 0, "GLOBAL_POSITION_INT": 33, "LOCAL_POSITION_NED": 32, "ATTITUDE": 30, "EXTENDED_SYS_STATE": 245,
                "SYS_STATUS": 1, "GPS_RAW_INT": 24, "HOME_POSITION": 242, "DISTANCE_SENSOR": 132, "SIM_STATE": 108}
-
-
-def _heartbeat_mode(fields: dict[str, Any]) -> FlightMode:
-    try:
-        return FlightMode(int(fields.get("custom_mode", 0)))
-    except ValueError:
-        return FlightMode.STABILIZE
-
-
-def _heartbeat_armed(fields: dict[str, Any]) -> bool:
-    return bool(int(fields.get("base_mode", 0)) & 128)  # MAV_MODE_FLAG_SAFETY_ARMED
-
-
-@dataclass(slots=True)
-class _Commanded:
-    """An accepted arm/disarm or mode change, until a HEARTBEAT confirms it."""
-
-    value: Any
-    acked_at_s: float  # vehicle time of the COMMAND_ACK
-    ack: tuple[int, int] | None = None  # (MAV_CMD, its n-th ACK on this link), to find it on the message stream
-    confirmed: bool = False
-
-    def confirm(self, heartbeat_value: Any) -> None:
-        """Note a HEARTBEAT's value: once one reports the commanded value, HEARTBEATs alone tell."""
-        self.confirmed = self.confirmed or heartbeat_value == self.value
-
-    def reported(self, heartbeat_value: Any, heard_s: float, heartbeats_after_ack: int | None) -> Any:
-        """What the vehicle is taken to be in, given the newest HEARTBEAT's `heartbeat_value`, sent at vehicle
-        time `heard_s`; `heartbeats_after_ack`: HEARTBEATs read after this command's ACK on the message
-        stream, or None where the stream shows no ACKs."""
-        if self.confirmed:
-            return heartbeat_value
-        elapsed_s = heard_s - self.acked_at_s
-        if heartbeats_after_ack is None:
-            after = elapsed_s >= COMMANDED_STATE_GRACE_S
-        else:
-            after = heartbeats_after_ack > 0 or elapsed_s >= COMMANDED_STATE_LIMIT_S
-        return heartbeat_value if after else self.value
 
 
 class MavlinkVehicle:
@@ -207,9 +159,9 @@ class MavlinkVehicle:
         self._closed = False
         self._connected = False
         self.system_id = 1
-        # An accepted arm/disarm or mode change holds until a HEARTBEAT sent after it is read (see _Commanded).
-        self._commanded_armed: _Commanded | None = None
-        self._commanded_mode: _Commanded | None = None
+        # An accepted arm/disarm or mode change holds until a HEARTBEAT sent after it is read (see Commanded).
+        self._commanded_armed: Commanded | None = None
+        self._commanded_mode: Commanded | None = None
         self._acks_returned: dict[int, int] = {}  # MAV_CMD -> COMMAND_ACKs its calls have returned
         self._acks_streamed: dict[int, list[int]] = {}  # MAV_CMD -> per ACK on the message stream, HEARTBEATs before
         self._final_acks_read: dict[int, int] = {}  # MAV_CMD -> final COMMAND_ACKs read on the message stream
@@ -446,9 +398,9 @@ class MavlinkVehicle:
     def _heartbeat_confirms(self, fields: dict[str, Any]) -> None:
         """Note a HEARTBEAT that reports a commanded state, so a later one reporting another counts at once."""
         if self._commanded_mode is not None:
-            self._commanded_mode.confirm(_heartbeat_mode(fields))
+            self._commanded_mode.confirm(heartbeat_mode(fields))
         if self._commanded_armed is not None:
-            self._commanded_armed.confirm(_heartbeat_armed(fields))
+            self._commanded_armed.confirm(heartbeat_armed(fields))
 
     def _check_link(self, operation: str) -> None:
         if self._closed or self._direct is None:
@@ -628,10 +580,10 @@ class MavlinkVehicle:
         number = await self._command(MAV_CMD_DO_SET_MODE, 1, mode.value, operation="set_mode")
         self._commanded_mode = self._commanded(mode, MAV_CMD_DO_SET_MODE, number)
 
-    def _commanded(self, value: Any, command: int, number: int | None) -> _Commanded:
-        return _Commanded(value, self.clock.now_s(), ack=None if number is None else (command, number))
+    def _commanded(self, value: Any, command: int, number: int | None) -> Commanded:
+        return Commanded(value, self.clock.now_s(), ack=None if number is None else (command, number))
 
-    def _heartbeats_after_ack(self, commanded: _Commanded) -> int | None:
+    def _heartbeats_after_ack(self, commanded: Commanded) -> int | None:
         """HEARTBEATs read after `commanded`'s COMMAND_ACK on the message stream (0 before it is read there), or
         None where the stream has shown no COMMAND_ACK (a vehicle or a link that leaves it out)."""
         if commanded.ack is None or not self._acks_streamed:
@@ -757,7 +709,7 @@ class MavlinkVehicle:
         distance = m.get("DISTANCE_SENSOR")
         hx, hy, hz = self._home_local()
         now_s = self.clock.now_s()
-        mode, armed = _heartbeat_mode(heartbeat), _heartbeat_armed(heartbeat)
+        mode, armed = heartbeat_mode(heartbeat), heartbeat_armed(heartbeat)
         # When the newest HEARTBEAT was sent, by the vehicle's clock: on a followed clock, the newest stamp read
         # before it on the same ordered stream (a backlog read late, on a loaded machine, is still early), else
         # the clock's own time.
