@@ -9,6 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from preland_app.campaign.driver import run_campaign
+from preland_app.campaign.executors.ray import LOCAL_WORKER_NICENESS
 from preland_app.campaign.spec import load_campaign
 from preland_app.campaign.store import ResultsStore
 from preland_app.cli import app
@@ -31,6 +32,9 @@ def test_ctrl_c_stops_a_ray_campaign_with_130_and_a_resumed_one_ends_leaving_no_
     wait_stored(db, 1, driver)
     started = ray_processes(driver.pid)
     assert any("raylet" in cmdline(pid) for pid in started), "the driver starts a local Ray instance of its own"
+    # Its trials run at nice 0 (Ray's default, 15, starves them beside any other busy process).
+    workers = [pid for pid in started if cmdline(pid).startswith("ray::")]
+    assert workers and {os.getpriority(os.PRIO_PROCESS, pid) for pid in workers} == {LOCAL_WORKER_NICENESS}
     os.killpg(driver.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the whole foreground process group
     _, stderr = driver.communicate(timeout=60)
     assert driver.returncode == 130, stderr
