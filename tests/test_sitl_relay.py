@@ -86,6 +86,8 @@ def test_a_gated_message_reaches_sitl_only_as_admitted():
         mavsdk.sendto(target, relay_address)
         assert sitl.recvfrom(65536)[0] == target
         until(lambda: relay.to_sitl["LANDING_TARGET"] == 2, timeout_s=10.0, what="the relay to count the target")
+        mavsdk.sendto(b"\x00\x01\x02", relay_address)  # no frame at all: passed as it came, counted under none
+        assert sitl.recvfrom(65536)[0] == b"\x00\x01\x02"
         assert relay.held_back == {"HEARTBEAT": 2} and relay.to_sitl == {"HEARTBEAT": 2, "LANDING_TARGET": 2}
     finally:
         relay.stop()

@@ -120,10 +120,12 @@ class MavlinkRelay:
                         continue
                     self._allowed[key] -= 1
                 kept.append((key, data[start:end]))
-            if kept:
-                self._sitl.sendto(data if len(kept) == len(spans) else b"".join(frame for _, frame in kept),
-                                  self._sitl_address)
-                self.to_sitl.update(key for key, _ in kept)  # counted once SITL's socket has it
+            if len(kept) < len(spans):
+                if not kept:
+                    return
+                data = b"".join(frame for _, frame in kept)
+            self._sitl.sendto(data, self._sitl_address)  # (bytes in no frame pass as they came)
+            self.to_sitl.update(key for key, _ in kept)  # counted once SITL's socket has it
 
     def idle(self) -> bool:
         """Nothing from SITL is waiting in the relay's socket or being passed on."""
