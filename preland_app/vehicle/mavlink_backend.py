@@ -27,8 +27,8 @@ import contextlib
 import json
 import math
 import time
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
 
 from ..mavlink.dialect import xml_text
 from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
@@ -105,6 +105,7 @@ FLOAT_PARAM_TYPES = (9, 10)  # MAV_PARAM_TYPE_REAL32, REAL64
 LOCAL_COMMAND_RESEND_WALL_S = 5.0
 MESSAGE_IDS = {"HEARTBEAT": 0, "GLOBAL_POSITION_INT": 33, "LOCAL_POSITION_NED": 32, "ATTITUDE": 30, "EXTENDED_SYS_STATE": 245,
                "SYS_STATUS": 1, "GPS_RAW_INT": 24, "HOME_POSITION": 242, "DISTANCE_SENSOR": 132, "SIM_STATE": 108}
+T = TypeVar("T")
 
 
 class MavlinkVehicle:
@@ -497,13 +498,18 @@ class MavlinkVehicle:
         """Paced, the vehicle's time stands still during an exchange with it (as in virtual time)."""
         return self._paced_clock.holding() if self._paced_clock is not None else contextlib.nullcontext()
 
-    def _exchanging(self, answered: Callable[[], bool] | None = None, *, sends: str | None = None):
-        """An exchange that waits for the vehicle's answer: paced, time stands still (the simulator answers
-        while it holds); in lock-step with SITL, time runs for it (SITL answers only as time passes) from
-        when SITL has the request until `answered()`, the answer read off the link."""
+    async def _exchange(self, request: Awaitable[T], *, answered: Callable[[], bool], sends: str | None = None) -> T:
+        """Await `request`, an exchange that waits for the vehicle's answer: paced, time stands still (the
+        simulator answers while it holds); in lock-step with SITL, time runs for it (SITL answers only as
+        time passes) from when SITL has the request (`sends`, the relay's key) until `answered()`, the answer
+        read off the link, and the task goes on once the clock has settled after it (`LockstepClock.answered`)."""
         if self._lockstep is None:
-            return self._holding()
-        return self._lockstep.exchanging(answered=answered, sends=sends)
+            with self._holding():
+                return await request
+        with self._lockstep.exchanging(answered=answered, sends=sends):
+            result = await request
+            await self._lockstep.answered(answered)
+            return result
 
     async def _send(self, name: str, fields: dict[str, Any], *, targeted: bool = True) -> None:
         with self._holding():
@@ -529,11 +535,8 @@ class MavlinkVehicle:
         def answered() -> bool:
             return self._final_acks_read.get(command, 0) > acks_before
 
-        with self._exchanging(answered=answered, sends=f"COMMAND_LONG:{command}"):
-            number = await self._command_now(command, *params, operation=operation, check=check)
-            if self._lockstep is not None:
-                await self._lockstep.answered(answered)
-            return number
+        return await self._exchange(self._command_now(command, *params, operation=operation, check=check),
+                                    answered=answered, sends=f"COMMAND_LONG:{command}")
 
     async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
@@ -646,26 +649,23 @@ class MavlinkVehicle:
             answer = self._param_values.get(name)
             return answer is not None and answer[2] > asked[0]
 
-        with self._exchanging(answered=answered):
-            value = await self._param_exchange_now(name, operation=operation, send=send, asked=asked)
-            if self._lockstep is not None:
-                await self._lockstep.answered(answered)
-            return value
+        return await self._exchange(self._param_exchange_now(name, operation=operation, send=send, asked=asked,
+                                                             answered=answered), answered=answered)
 
     async def _param_exchange_now(self, name: str, *, operation: str, send: dict[str, Any] | None,
-                                  asked: list[int]) -> tuple[float, int]:
+                                  asked: list[int], answered: Callable[[], bool]) -> tuple[float, int]:
         for _ in range(PARAM_TRIES):
             self._check_link(operation)
-            seen = asked[0] = self._param_receipts
+            asked[0] = self._param_receipts
             if send is None:
                 await self._send("PARAM_REQUEST_READ", {"param_id": name, "param_index": -1})
             else:
                 await self._send("PARAM_SET", {"param_id": name, **send})
             deadline = time.monotonic() + PARAM_TIMEOUT_S
             while time.monotonic() < deadline:
-                answer = self._param_values.get(name)
-                if answer is not None and answer[2] > seen:
-                    return answer[0], answer[1]
+                if answered():
+                    value, mav_type, _ = self._param_values[name]
+                    return value, mav_type
                 await self._poll_pause()
         raise CommandDenied(operation=operation, reason=f"{name}: no PARAM_VALUE after {PARAM_TRIES} tries "
                                                         "(no such parameter?)")
