@@ -1,5 +1,6 @@
 """The SITL runtime: a fake `arducopter` for launching, stopping and orphans; the real one when it is there."""
 
+import dataclasses
 import json
 import math
 import os
@@ -179,24 +180,25 @@ def _wait_dead(pid: int, timeout_s: float = 30.0) -> None:
     until(lambda: not _alive(pid), timeout_s=timeout_s, what=f"SITL process {pid} to end")
 
 
-def test_without_copter_defaults_the_stand_in_refuses_to_arm_as_arducopter_does(fake_sitl, thesis_mission, tmp_path):
-    """ArduCopter's FRAME_CLASS defaults to 0 and its motors refuse to arm; preland's packaged defaults set it."""
+@pytest.mark.parametrize("physics", ["ardupilot", "preland"])
+def test_without_copter_defaults_the_stand_in_refuses_to_arm_as_arducopter_does(fake_sitl, thesis_mission, tmp_path,
+                                                                               monkeypatch, physics):
+    """ArduCopter's FRAME_CLASS defaults to 0 and its motors refuse to arm; preland's packaged defaults set it.
+    The refusal's reason (ArduPilot's STATUSTEXT beside the COMMAND_ACK) is told, in lock-step too."""
     script, logs = fake_sitl
     (tmp_path / "empty.parm").write_text("")
     from preland_app.runtime import sitl as sitl_module
 
     # The stand-in's face keeps to its clock: at 40x, the 5 vehicle s without a heartbeat that end a trial
     # are 0.125 wall s, which a loaded machine stalls a process for (it ran at about 8x before).
-    options = SitlOptions(binary=script, speedup=STAND_IN_SPEEDUP)
+    options = SitlOptions(binary=script, speedup=STAND_IN_SPEEDUP, physics=physics)
     assert options.defaults_files()[0] == sitl_module.PACKAGED_DEFAULTS  # not in an ArduPilot tree
     packaged = sitl_module.PACKAGED_DEFAULTS.read_text()
     assert "FRAME_CLASS 1" in packaged and "FRAME_TYPE 0" in packaged
-    original = sitl_module.PACKAGED_DEFAULTS
-    sitl_module.PACKAGED_DEFAULTS = tmp_path / "empty.parm"
-    try:
-        outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=2), options=options)
-    finally:
-        sitl_module.PACKAGED_DEFAULTS = original
+    monkeypatch.setattr(sitl_module, "PACKAGED_DEFAULTS", tmp_path / "empty.parm")
+    monkeypatch.setattr(sitl_module, "JSON_QUADX_DEFAULTS", tmp_path / "empty.parm")
+    mission = dataclasses.replace(thesis_mission, timeouts=dataclasses.replace(thesis_mission.timeouts, arm_s=5.0))
+    outcome = run_sitl_trial(TrialRequest(mission=mission, seed=2), options=options)
     assert outcome.outcome is Outcome.ERROR and "Check frame class and type" in outcome.message
 
 
@@ -319,6 +321,9 @@ def test_a_trial_on_preland_physics_runs_sitl_on_the_json_bridge(fake_sitl, thes
     assert [math.floor(t + 1e-6) for t in in_mission_s] == list(range(16, 16 + len(in_mission_s)))
     # (read within the stand-in's next two physics frames, as it steps on from the held time)
     assert all(t - math.floor(t + 1e-6) < 2.5 / FRAME_RATE_HZ for t in in_mission_s), in_mission_s
+    # SITL takes its SIGTERM at its next step: the physics the companion held at the trial's end was let go
+    # for it, so it exited on its own (not killed after the grace).
+    assert (logs / f"{launch['pid']}.exit").read_text() == "SIGTERM\n"
     assert not _alive(launch["pid"]) and _children() == []
     assert _bridge_threads() == []
 

@@ -160,8 +160,13 @@ def test_an_exchange_whose_request_reaches_sitl_late_runs_time_once_it_has(monke
 
     monkeypatch.setattr(lockstep_clock, "EXCHANGE_DELIVERY_WALL_S", 0.0)
     monkeypatch.setattr(lockstep_clock, "RELAYED_MAX_WALL_S", 60.0)  # only the relay's count lets time run
-    relay = types.SimpleNamespace(to_sitl=collections.Counter())
+    monkeypatch.setattr(lockstep_clock, "LOOK_WALL_S", 60.0)  # and the clock sees it when the relay tells it
+    relay = types.SimpleNamespace(to_sitl=collections.Counter(), on_pass=None)
     seen: dict[str, float] = {}
+
+    def relay_passes(key: str) -> None:  # as the relay's thread does: count, then tell
+        relay.to_sitl.update([key])
+        relay.on_pass()
 
     async def main(bridge: JsonBridge) -> None:
         clock = LockstepClock(gate=bridge.gate, stall_wall_s=30.0, relay=relay)
@@ -177,7 +182,7 @@ def test_an_exchange_whose_request_reaches_sitl_late_runs_time_once_it_has(monke
                 await loop.run_in_executor(None, lambda: until(lambda: bridge.gate.waiting, timeout_s=30,
                                                                what="the physics at the hold"))
                 seen["held_s"] = clock.now_s()
-                await loop.run_in_executor(None, lambda: relay.to_sitl.update(["COMMAND_LONG"]))
+                await loop.run_in_executor(None, relay_passes, "COMMAND_LONG")
                 await until_async(lambda: clock.now_s() >= seen["asked_s"] + 0.05, timeout_s=20,
                                   what="time to run once the request is in SITL's socket")
 
@@ -195,7 +200,7 @@ def test_a_physics_this_clock_holds_for_too_long_is_not_called_a_silent_sitl(mon
 
     monkeypatch.setattr(lockstep_clock, "EXCHANGE_DELIVERY_WALL_S", 0.0)
     monkeypatch.setattr(lockstep_clock, "RELAYED_MAX_WALL_S", 60.0)
-    relay = types.SimpleNamespace(to_sitl=collections.Counter())
+    relay = types.SimpleNamespace(to_sitl=collections.Counter(), on_pass=None)
     raised: list[BaseException] = []
 
     async def main(bridge: JsonBridge) -> None:
@@ -275,11 +280,16 @@ def test_the_receive_queue_of_a_udp_socket_is_read_from_the_kernel():
     assert udp_receive_queue(port, table="/nonexistent") == 0
 
 
-def test_a_wake_takes_in_what_sitl_sent_in_the_loop_of_its_step_however_slow_that_loop():
+def test_a_wake_takes_in_what_sitl_sent_in_the_loop_of_its_step_however_slow_that_loop(monkeypatch):
     """SITL runs its loop after each answer (sending its messages) and only then asks for the next step:
     a task woken at a deadline must see everything the loop of that step sent, however long the loop takes.
     The SITL played here sends a step's messages only once the companion's wake has gone on without them
-    (its settle ended) or waits for SITL."""
+    (its settle ended) or waits for SITL. The wake learns that the physics waits from the gate, not by
+    looking again later (the look is put off beyond the test's bound)."""
+    import preland_app.vehicle.lockstep_clock as lockstep_clock
+
+    monkeypatch.setattr(lockstep_clock, "LOOK_WALL_S", 60.0)
+    monkeypatch.setattr(lockstep_clock, "SITL_LOOP_MAX_WALL_S", 60.0)
     bridge = JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), port=0)
     clock = LockstepClock(gate=bridge.gate, stall_wall_s=30.0)
     sent = [0]  # the steps whose loop has sent its messages
@@ -312,6 +322,7 @@ def test_a_wake_takes_in_what_sitl_sent_in_the_loop_of_its_step_however_slow_tha
     _run_on_played_bridge(main, bridge=bridge, player=slow_sitl)
     assert len(seen) == 20
     assert all(messages == steps for messages, steps in seen), seen
+    assert clock.unsettled == 0  # each wake saw SITL's loop end, none went on at its bound
 
 
 def test_an_answer_read_mid_step_ends_the_step_where_it_was_to_and_the_task_goes_on_once_sitl_stands_there(
@@ -360,6 +371,8 @@ def test_an_answer_read_mid_step_ends_the_step_where_it_was_to_and_the_task_goes
                 step_end_s = bridge.gate.hold_at_s
                 permits.release()
                 await until_async(lambda: clock.now_s() > start_s, timeout_s=30, what="one frame of the step")
+                clock._apply()  # a look mid-step (another task's sleep, a delivery) keeps the step's end
+                seen["hold_mid_step_s"] = bridge.gate.hold_at_s
                 answer_in = True  # read off the link in the middle of the step
                 clock._apply()  # the hold, as the clock's next look sets it
                 seen["hold_after_answer_s"] = bridge.gate.hold_at_s
@@ -377,6 +390,7 @@ def test_an_answer_read_mid_step_ends_the_step_where_it_was_to_and_the_task_goes
 
     bridge = _run_on_played_bridge(main, player=player)
     assert seen["step_end_s"] == seen["start_s"] + lockstep_clock.EXCHANGE_STEP_S
+    assert seen["hold_mid_step_s"] == seen["step_end_s"]
     assert seen["hold_after_answer_s"] == seen["step_end_s"]  # not the mid-step time the answer was read at
     assert seen["went_on_mid_step"] is False
     assert seen["step_end_s"] <= seen["went_on_at_s"] < seen["step_end_s"] + frame_s + 1e-9

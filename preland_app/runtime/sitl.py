@@ -498,6 +498,10 @@ class SitlInstance:
     def stop(self) -> None:
         process = self.process
         if process is not None and process.poll() is None:
+            if self.bridge is not None:
+                # SITL reads its SIGTERM in its main loop, which on preland's physics waits for the physics'
+                # answer: a physics the companion's clock still holds would keep it there for the whole grace.
+                self.bridge.gate.hold_at(None)
             try:
                 os.killpg(process.pid, signal.SIGTERM)
                 # A stopped SITL (SIGSTOP, a debugger) takes its SIGTERM only once continued, as `kill` and

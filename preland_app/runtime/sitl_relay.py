@@ -20,6 +20,7 @@ import select
 import socket
 import struct
 import threading
+from collections.abc import Callable
 
 from ..mavlink.dialect import MAGIC_V2
 
@@ -80,6 +81,7 @@ class MavlinkRelay:
         self._allowed: dict[str, int] = {}  # gated key -> frames of it still admitted
         self._lock = threading.Lock()
         self._passing = False  # a datagram is read and not yet counted and passed on
+        self.on_pass: Callable[[], None] | None = None  # called (from the relay's thread) after each datagram
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="preland-sitl-relay", daemon=True)
 
@@ -158,3 +160,5 @@ class MavlinkRelay:
                     pass  # a closed socket (stopping), or a peer not there yet: UDP drops it as the link would
                 finally:
                     self._passing = False
+                    if self.on_pass is not None:
+                        self.on_pass()

@@ -37,6 +37,7 @@ class StepGate:
         self.holds = 0  # steps that had to wait for a hold to move
         self.held_wall_s = 0.0  # wall seconds the physics spent held
         self.waiting = False  # the physics thread stands at the hold now
+        self.on_waiting: Callable[[], None] | None = None  # called from the physics thread as it starts to wait
 
     @property
     def time_s(self) -> float:
@@ -77,6 +78,8 @@ class StepGate:
         self.holds += 1
         with self._condition:
             self.waiting = True
+            if self.on_waiting is not None:
+                self.on_waiting()
             while self.held() and not stop.is_set():
                 self._condition.wait(_POLL_WALL_S)
             self.waiting = False

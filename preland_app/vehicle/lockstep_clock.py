@@ -66,7 +66,8 @@ MISSION_START_S = 15.0
 # answer is seen within one loop of its sending (vehicle s).
 EXCHANGE_STEP_S = 0.0025
 # What SITL sent before a hold is taken in when nothing more has come for this long (wall s), within the
-# bound after it (wall s; a message later than that is read at a later vehicle time).
+# bound after it (wall s; a message later than that is read at a later vehicle time). Also how often a
+# request's delivery is looked at without a relay (nothing then tells this clock when it is delivered).
 SETTLE_WALL_S = 0.0005
 SETTLE_MAX_WALL_S = 0.05
 # How long MAVSDK's thread is given to send a message before the vehicle's time goes on (wall s).
@@ -80,6 +81,10 @@ RELAYED_MAX_WALL_S = 2.0
 # How long SITL may take to finish its loop and ask for the next step before a wake goes on without it
 # (wall s; far more than the loop takes, short enough for a hold the physics never reaches).
 SITL_LOOP_MAX_WALL_S = 0.5
+# A wait for a condition is woken when what it reads may have changed (`nudge`: the physics stands at its
+# hold, the relay passed a datagram, the vehicle read a message); it also looks this often (wall s), so a
+# change nothing told of costs this long, never the wait's bound.
+LOOK_WALL_S = 0.005
 
 
 class LockstepClock:
@@ -102,7 +107,7 @@ class LockstepClock:
         self._undelivered: list[Callable[[], bool]] = []  # of the exchanges running: has SITL its request?
         self._exchange_step_s = -math.inf  # where the exchange's step under way ends (vehicle s)
         self._sending = 0  # messages just handed to MAVSDK, given DELIVERY_WALL_S to leave
-        self._delivery_watched = False  # a look at the undelivered requests is due (see _apply)
+        self._delivery_look: asyncio.TimerHandle | None = None  # at the undelivered requests (see _apply)
         self.activity: Callable[[], object] | None = None  # see the module: what settles before a wake
         self._relay = relay
         self.listened: collections.Counter[str] | None = None  # the vehicle's messages taken in, by name
@@ -117,6 +122,10 @@ class LockstepClock:
         self.settles = 0
         self.settle_wall_s = 0.0  # wall s spent waiting for SITL's messages before wakes
         self._after_ready = AfterReady(self._apply)
+        self._change_waiters: set[asyncio.Future] = set()  # waits woken by `nudge` (see `_until`)
+        gate.on_waiting = self.nudge_threadsafe
+        if relay is not None:
+            relay.on_pass = self.nudge_threadsafe
         self._start_wall_s = time.monotonic()
         self._start_s = gate.time_s
         self.wakes = 0
@@ -229,9 +238,7 @@ class LockstepClock:
             if delivered is None:
                 await asyncio.sleep(DELIVERY_WALL_S)
             else:
-                deadline_wall_s = time.monotonic() + RELAYED_MAX_WALL_S
-                while not delivered() and time.monotonic() < deadline_wall_s:
-                    await asyncio.sleep(SETTLE_WALL_S)
+                await self._until(delivered, bound_wall_s=RELAYED_MAX_WALL_S, counted=False)
         finally:
             self._sending -= 1
             self._update()
@@ -287,16 +294,51 @@ class LockstepClock:
         if self._relay is not None and self.listened is not None and self._reconciled:
             await self._take_in_relayed()
 
-    async def _until(self, condition: Callable[[], bool], *, bound_wall_s: float) -> bool:
-        """Wait until `condition()`, looking every SETTLE_WALL_S; False (counted in `unsettled`) when
-        `bound_wall_s` passed first."""
+    async def _until(self, condition: Callable[[], bool], *, bound_wall_s: float, counted: bool = True) -> bool:
+        """Wait until `condition()`, looking again at each `nudge` (at least every LOOK_WALL_S); False (counted
+        in `unsettled` if `counted`) when `bound_wall_s` passed first."""
+        if condition():
+            return True
+        loop = asyncio.get_running_loop()
         deadline_wall_s = time.monotonic() + bound_wall_s
-        while not condition():
-            if time.monotonic() > deadline_wall_s:
-                self.unsettled += 1
+        while True:
+            remaining_wall_s = deadline_wall_s - time.monotonic()
+            if remaining_wall_s < 0:
+                self.unsettled += counted
                 return False
-            await asyncio.sleep(SETTLE_WALL_S)
-        return True
+            changed = loop.create_future()
+            # Registered before the condition is read again: a change made meanwhile on another thread
+            # either shows in the condition or finds this wait to nudge.
+            self._change_waiters.add(changed)
+            try:
+                if condition():
+                    return True
+                look = loop.call_later(min(remaining_wall_s, LOOK_WALL_S), _resolve, changed)
+                try:
+                    await changed
+                finally:
+                    look.cancel()
+            finally:
+                self._change_waiters.discard(changed)
+            if condition():
+                return True
+
+    def nudge(self) -> None:
+        """What a wait for a condition reads, or a request's delivery, may have changed: they are looked at
+        again (on the event loop's thread)."""
+        for changed in self._change_waiters:
+            _resolve(changed)
+        if self._delivery_look is not None:
+            self._update()
+
+    def nudge_threadsafe(self) -> None:
+        """`nudge` from another thread (the physics', the relay's); nothing when nothing looks."""
+        loop = self._loop
+        if (self._change_waiters or self._delivery_look is not None) and loop is not None:
+            try:
+                loop.call_soon_threadsafe(self.nudge)
+            except RuntimeError:  # the loop closed meanwhile: the trial is over
+                pass
 
     def _holders(self) -> list[str]:
         return sorted(task.get_name() for task in self._participants if task not in self._asleep)
@@ -315,11 +357,15 @@ class LockstepClock:
         now_s = self.now_s()
         wake_s = self._sleepers[0][0] if self._sleepers else math.inf
         undelivered = not all(delivered() for delivered in self._undelivered)
-        if undelivered and not self._delivery_watched:
-            # Nothing tells this clock when a request is delivered (the relay passes it on from its own
-            # thread; without one, a wall time passes): look again until it is, else time would stand.
-            self._delivery_watched = True
-            self._loop.call_later(SETTLE_WALL_S, self._delivery_look)
+        if undelivered and self._delivery_look is None:
+            # Without a relay nothing tells this clock when a request is delivered (a wall time passes), and
+            # with one the relay's nudge does: look again until it is, else time would stand.
+            self._delivery_look = self._loop.call_later(SETTLE_WALL_S if self._relay is None else LOOK_WALL_S,
+                                                        self._look_at_delivery)
+        elif not undelivered and self._delivery_look is not None:
+            # Delivered: no look after this one, which would step an exchange on from wherever time is then.
+            self._delivery_look.cancel()
+            self._delivery_look = None
         if self._holders() or self._sending or undelivered:
             # A reading is being made or a request is on its way to SITL: the vehicle waits.
             hold_s = now_s
@@ -328,16 +374,18 @@ class LockstepClock:
             # same vehicle time whenever this machine read the answer.
             hold_s = max(now_s, self._exchange_step_s)
         elif self._exchanges:
-            hold_s = wake_s = min(wake_s, now_s + EXCHANGE_STEP_S)  # told there, to step on
-            self._exchange_step_s = hold_s
+            if self._exchange_step_s <= now_s + REACHED_S:
+                self._exchange_step_s = now_s + EXCHANGE_STEP_S
+            # Told there, to step on. A step under way keeps its end, however often this runs meanwhile.
+            self._exchange_step_s = hold_s = wake_s = min(wake_s, self._exchange_step_s)
         else:
             hold_s = None if math.isinf(wake_s) else wake_s
         self._gate.hold_at(hold_s)
         if not math.isinf(wake_s):
             self._gate.wake_at(wake_s, self._woken)
 
-    def _delivery_look(self) -> None:
-        self._delivery_watched = False
+    def _look_at_delivery(self) -> None:
+        self._delivery_look = None
         self._update()
 
     # ---------------------------------------------------------------- waking
@@ -401,20 +449,17 @@ class LockstepClock:
     async def _take_in_relayed(self) -> None:
         """Wait until the relay has passed on all SITL sent and the vehicle has taken in as many of each
         message it reads as the relay passed on; one never taken in within the bound is forgiven after."""
-        deadline_wall_s = time.monotonic() + RELAYED_MAX_WALL_S
-        while True:
-            behind = {} if self._relay.idle() else {"(relay)": 1}
-            if not behind:
-                relayed, listened = self._relay.from_sitl, self.listened
-                behind = {name: relayed[name] - self._forgiven[name] - listened[name] for name in self.taken_in
-                          if relayed[name] - self._forgiven[name] > listened[name]}
-            if not behind:
-                return
-            if time.monotonic() > deadline_wall_s:
-                self.unsettled += 1
-                self._forgiven.update({name: count for name, count in behind.items() if name in self.taken_in})
-                return
-            await asyncio.sleep(SETTLE_WALL_S)
+        if not await self._until(lambda: not self._behind(), bound_wall_s=RELAYED_MAX_WALL_S):
+            self._forgiven.update({name: count for name, count in self._behind().items() if name in self.taken_in})
+
+    def _behind(self) -> dict[str, int]:
+        """What the vehicle has yet to take in of what the relay passed on, by name ("(relay)": the relay has
+        yet to pass on something of SITL's)."""
+        if not self._relay.idle():
+            return {"(relay)": 1}
+        relayed, listened = self._relay.from_sitl, self.listened
+        return {name: relayed[name] - self._forgiven[name] - listened[name] for name in self.taken_in
+                if relayed[name] - self._forgiven[name] > listened[name]}
 
     def _wake_sleepers(self) -> None:
         now_s = self.now_s()
@@ -440,6 +485,11 @@ class LockstepClock:
                                          f"{self._exchanges} exchanges, settling {self._settling})")
         raise LinkLost(operation="lock-step physics", reason=f"SITL sent no servo packet for "
                                                              f"{silent_wall_s:.0f} wall s")
+
+
+def _resolve(future: asyncio.Future) -> None:
+    if not future.done():
+        future.set_result(None)
 
 
 def udp_receive_queue(port: int, *, table: str = "/proc/net/udp") -> int:

@@ -348,6 +348,8 @@ class MavlinkVehicle:
             name = message.message_name
             self._received += 1
             self._listened[name] += 1
+            if self._lockstep is not None:
+                self._lockstep.nudge()  # its waits look again once this message is read (below)
             if self.tlog is not None:
                 self.tlog.write(name=name, fields=fields, system_id=message.system_id,
                                 component_id=message.component_id)
@@ -535,16 +537,31 @@ class MavlinkVehicle:
         def answered() -> bool:
             return self._final_acks_read.get(command, 0) > acks_before
 
-        return await self._exchange(self._command_now(command, *params, operation=operation, check=check),
-                                    answered=answered, sends=f"COMMAND_LONG:{command}")
+        texts_before = len(self._status_texts)
+        acked = await self._exchange(self._command_now(command, *params, operation=operation, check=check),
+                                     answered=answered, sends=f"COMMAND_LONG:{command}")
+        if acked is None:
+            return None
+        number, result = acked
+        if check and result != 0:
+            if self._lockstep is None:
+                # ArduPilot sends its reason as STATUSTEXT around the ACK (paced, still in the exchange's hold).
+                # In lock-step the exchange ended with all SITL sent up to its answer taken in.
+                with self._holding():
+                    await asyncio.sleep(0.05)
+            reasons = [t for t in self._status_texts[texts_before:] if t]
+            raise CommandDenied(operation=operation,
+                                reason=reasons[-1] if reasons else f"MAV_RESULT {result}")
+        return number
 
-    async def _command_now(self, command: int, *params: float, operation: str, check: bool = True) -> int | None:
+    async def _command_now(self, command: int, *params: float, operation: str,
+                           check: bool = True) -> tuple[int, int] | None:
+        """Send COMMAND_LONG; (which ACK of `command` on this link, its MAV_RESULT), None without an ACK."""
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         values = list(params) + [0.0] * (7 - len(params))
         fields = {"target_system": self.system_id, "target_component": 1, "command": command, "confirmation": 0,
                   **{f"param{i + 1}": float(v) for i, v in enumerate(values)}}
-        texts_before = len(self._status_texts)
         try:
             ack = await self._direct.send_command(MavlinkMessage(
                 message_name="COMMAND_LONG", target_system_id=self.system_id, target_component_id=1,
@@ -554,13 +571,7 @@ class MavlinkVehicle:
                 raise LinkLost(operation=operation, reason=f"no COMMAND_ACK ({error})") from None
             return None
         self._acks_returned[command] = number = self._acks_returned.get(command, 0) + 1
-        result = json.loads(ack.fields_json or "{}").get("result", 0)
-        if check and result != 0:
-            await asyncio.sleep(0.05)  # ArduPilot sends its reason as STATUSTEXT around the ack
-            reasons = [t for t in self._status_texts[texts_before:] if t]
-            raise CommandDenied(operation=operation,
-                                reason=reasons[-1] if reasons else f"MAV_RESULT {result}")
-        return number
+        return number, int(json.loads(ack.fields_json or "{}").get("result", 0))
 
     # ---------------------------------------------------------------- the protocol
 

@@ -10,12 +10,15 @@ below the quad X's hover, so the physics stays on the ground) to HOST at `--sim-
 each wall second without an answer. It writes the answers it got to PID.json_answers (a count). Its flight
 stays the embedded simulator's, served over MAVLink as without JSON, but on SITL's clock in lock-step: the
 physics' time (answers / FRAME_RATE_HZ); the next servo packet leaves only once the face has served the
-time of the last answer (SITL runs its loop, MAVLink included, before it asks for the next step)."""
+time of the last answer (SITL runs its loop, MAVLink included, before it asks for the next step). As SITL
+(HAL_SITL's SIGTERM handler), on JSON it takes a SIGTERM only at its next step: while the physics does not
+answer, it runs no step and does not exit; once it does, it writes PID.exit ("SIGTERM") and exits 0."""
 
 import argparse
 import asyncio
 import json
 import os
+import signal
 import socket
 import sys
 import threading
@@ -110,6 +113,9 @@ class PhysicsTime:
                 lambda: self._sleeper is not None and self._sleeper[0] > self.now_s() + _SAME_S, timeout=timeout_s)
 
 
+_SHOULD_EXIT = threading.Event()  # set by SIGTERM on JSON, read after each answered step (see the module)
+
+
 def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | None,
                        physics_time: PhysicsTime) -> None:
     """SITL's side of the JSON interface, in lock-step: send a servo packet, wait for its answer, let the face
@@ -136,6 +142,10 @@ def serve_json_physics(*, host: str, port: int, speedup: float, log_dir: str | N
                     print("No JSON sensor message received, resending servos", flush=True)  # as SITL says it
                     sock.sendto(packet, (host, port))  # the same frame_count again, as SITL resends
             answers += 1
+            if _SHOULD_EXIT.is_set():
+                if log_dir:
+                    _write_whole(Path(log_dir, f"{os.getpid()}.exit"), "SIGTERM\n")
+                os._exit(0)
             physics_time.answered()
             if not physics_time.wait_served(SERVED_TIMEOUT_S):
                 print(f"fake SITL: the face did not serve physics time {physics_time.now_s():.2f} s within "
@@ -232,6 +242,7 @@ def main(args: argparse.Namespace) -> None:
     if on_json:
         host = args.model.partition(":")[2] or "127.0.0.1"
         port = args.sim_port_out if args.sim_port_out is not None else DEFAULT_PORT + 10 * args.instance
+        signal.signal(signal.SIGTERM, lambda *_: _SHOULD_EXIT.set())
         threading.Thread(target=serve_json_physics, daemon=True,
                          kwargs={"host": host, "port": port, "speedup": args.speedup, "log_dir": log_dir,
                                  "physics_time": clock}).start()
