@@ -63,17 +63,27 @@ class SensorSmoothing:
                                rangefinder_down_m=state.rangefinder_down_m)
 
     def _step(self, state: MultirotorState, dt_s: float) -> None:
+        # Written out per axis (once per physics step): the same operations, in the same order, as the
+        # vector forms in the comments.
         tc = TIME_CONSTANT_S
+        limit = ACCEL_LIMIT_M_S2
         p, v, q = state.position_ned_m, state.velocity_ned_m_s, state.quaternion_wxyz
         r = rotation_body_to_ned(*q)
-        f = state.accel_frd_m_s2
-        true_accel_ned = [r[i][0] * f[0] + r[i][1] * f[1] + r[i][2] * f[2] for i in range(3)]
-        true_accel_ned[2] += GRAVITY_M_S2
-        accel_ned = [min(max(((v[i] - self._v[i]) + (p[i] - self._p[i]) / tc) / tc + true_accel_ned[i],
-                             -ACCEL_LIMIT_M_S2), ACCEL_LIMIT_M_S2) for i in range(3)]
+        f0, f1, f2 = state.accel_frd_m_s2
+        # the true acceleration in NED: R f + g
+        t0 = r[0][0] * f0 + r[0][1] * f1 + r[0][2] * f2
+        t1 = r[1][0] * f0 + r[1][1] * f1 + r[1][2] * f2
+        t2 = r[2][0] * f0 + r[2][1] * f1 + r[2][2] * f2 + GRAVITY_M_S2
+        # the smoothed body's: towards the true velocity and position, within the limit
+        sp, sv = self._p, self._v
+        a0 = min(max(((v[0] - sv[0]) + (p[0] - sp[0]) / tc) / tc + t0, -limit), limit)
+        a1 = min(max(((v[1] - sv[1]) + (p[1] - sp[1]) / tc) / tc + t1, -limit), limit)
+        a2 = min(max(((v[2] - sv[2]) + (p[2] - sp[2]) / tc) / tc + t2, -limit), limit)
         rs = rotation_body_to_ned(*self._q)
-        fn, fe, fd = accel_ned[0], accel_ned[1], accel_ned[2] - GRAVITY_M_S2
-        self._accel = tuple(rs[0][j] * fn + rs[1][j] * fe + rs[2][j] * fd for j in range(3))
+        fn, fe, fd = a0, a1, a2 - GRAVITY_M_S2
+        # the specific force in the smoothed body: R_s^T (a - g)
+        self._accel = (rs[0][0] * fn + rs[1][0] * fe + rs[2][0] * fd, rs[0][1] * fn + rs[1][1] * fe + rs[2][1] * fd,
+                       rs[0][2] * fn + rs[1][2] * fe + rs[2][2] * fd)
         # the body-frame rotation from the smoothed attitude to the true one (AP's Quaternion operator/)
         sq = self._q
         w, x, y, z = _multiply((sq[0], -sq[1], -sq[2], -sq[3]), q)
@@ -91,5 +101,7 @@ class SensorSmoothing:
             nw, nx, ny, nz = _multiply(sq, (math.cos(half), g0 * k, g1 * k, g2 * k))
             norm = math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
             self._q = (nw / norm, nx / norm, ny / norm, nz / norm)
-        self._v = [self._v[i] + accel_ned[i] * dt_s for i in range(3)]
-        self._p = [self._p[i] + self._v[i] * dt_s for i in range(3)]  # as SITL: with the new velocity
+        # velocity, then position with the new velocity (as SITL)
+        v0, v1, v2 = sv[0] + a0 * dt_s, sv[1] + a1 * dt_s, sv[2] + a2 * dt_s
+        self._v = [v0, v1, v2]
+        self._p = [sp[0] + v0 * dt_s, sp[1] + v1 * dt_s, sp[2] + v2 * dt_s]

@@ -28,6 +28,7 @@ parser, which constrains the text:
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import struct
@@ -41,6 +42,7 @@ MAGIC_16 = 18458  # SIM_JSON.h servo_packet_16
 MAGIC_32 = 29569  # SIM_JSON.h servo_packet_32
 _HEADER = struct.Struct("<HHI")
 _CHANNELS_BY_MAGIC = {MAGIC_16: 16, MAGIC_32: 32}
+_PWM_BY_MAGIC = {magic: struct.Struct(f"<{channels}H") for magic, channels in _CHANNELS_BY_MAGIC.items()}
 DEFAULT_PORT = 9002  # SITL_cmdline.cpp SIM_OUT_PORT; instance N uses 9002 + 10 N
 
 # SIM_JSON.h keytable: (section, key, required)
@@ -82,7 +84,7 @@ def parse_servo_packet(data: bytes) -> ServoPacket:
         raise SitlJsonError(f"servo packet with magic {magic} has {len(data)} bytes, not {expected}")
     if frame_rate_hz == 0:
         raise SitlJsonError("servo packet with frame rate 0")
-    pwm = struct.unpack_from(f"<{channels}H", data, _HEADER.size)
+    pwm = _PWM_BY_MAGIC[magic].unpack_from(data, _HEADER.size)
     return ServoPacket(magic=magic, frame_rate_hz=frame_rate_hz, frame_count=frame_count, pwm_us=pwm)
 
 
@@ -122,25 +124,53 @@ def build_reply(state: MultirotorState, *, include_euler: bool = False, include_
     when `wind_ned_m_s` is given, last, since SIM_JSON finds keys by substring and `velocity` must match
     first. The timestamp is the model's simulated time (s).
 
-    Written directly, not through json.dumps: the same text (json.dumps writes a float as its repr), in
-    a fifth of the time, once per physics step.
+    Written directly, not through json.dumps: the same text (json.dumps writes a float as its repr, as
+    `%r` does), in a fraction of the time, once per physics step.
     """
-    parts = [f'\n{{"timestamp":{_number(state.time_s, "timestamp")}',
-             f',"imu":{{"gyro":{_vector(state.gyro_frd_rad_s, "gyro")}',
-             f',"accel_body":{_vector(state.accel_frd_m_s2, "accel_body")}}}',
-             f',"position":{_vector(state.position_ned_m, "position")}',
-             f',"velocity":{_vector(state.velocity_ned_m_s, "velocity")}',
-             f',"quaternion":{_vector(state.quaternion_wxyz, "quaternion")}']
+    values = [state.time_s, *state.gyro_frd_rad_s, *state.accel_frd_m_s2, *state.position_ned_m,
+              *state.velocity_ned_m_s, *state.quaternion_wxyz]
     if include_euler:
-        parts.append(f',"attitude":{_vector(state.euler_rad, "attitude")}')
+        values += state.euler_rad
     if include_rangefinder:
-        parts.append(f',"rng_1":{_number(state.rangefinder_down_m, "rng_1")}')
+        values.append(state.rangefinder_down_m)
     if battery_voltage_v is not None:
-        parts.append(f',"battery":{{"voltage":{_number(battery_voltage_v, "battery voltage")}}}')
+        values.append(battery_voltage_v)
     if wind_ned_m_s is not None:
-        parts.append(f',"velocity_wind":{_vector(wind_ned_m_s, "velocity_wind")}')
-    parts.append("}\n")
-    return "".join(parts)
+        values += wind_ned_m_s
+    numbers = tuple(map(float, values))
+    if not all(map(math.isfinite, numbers)):
+        _refuse_not_finite(state, include_euler=include_euler, include_rangefinder=include_rangefinder,
+                           battery_voltage_v=battery_voltage_v, wind_ned_m_s=wind_ned_m_s)
+    return _reply_format(include_euler, include_rangefinder, battery_voltage_v is not None,
+                         wind_ned_m_s is not None) % numbers
+
+
+@functools.lru_cache(maxsize=None)
+def _reply_format(euler: bool, rangefinder: bool, battery: bool, wind: bool) -> str:
+    """The reply's text with a `%r` for each number, in `build_reply`'s order."""
+    return "".join([
+        '\n{"timestamp":%r,"imu":{"gyro":[%r,%r,%r],"accel_body":[%r,%r,%r]}',
+        ',"position":[%r,%r,%r],"velocity":[%r,%r,%r],"quaternion":[%r,%r,%r,%r]',
+        ',"attitude":[%r,%r,%r]' if euler else "",
+        ',"rng_1":%r' if rangefinder else "",
+        ',"battery":{"voltage":%r}' if battery else "",
+        ',"velocity_wind":[%r,%r,%r]' if wind else "",
+        "}\n"])
+
+
+def _refuse_not_finite(state: MultirotorState, *, include_euler: bool, include_rangefinder: bool,
+                       battery_voltage_v: float | None, wind_ned_m_s: tuple[float, float, float] | None) -> None:
+    """SitlJsonError naming the first value of a reply that is not finite."""
+    _number(state.time_s, "timestamp")
+    for name, vector in (("gyro", state.gyro_frd_rad_s), ("accel_body", state.accel_frd_m_s2),
+                         ("position", state.position_ned_m), ("velocity", state.velocity_ned_m_s),
+                         ("quaternion", state.quaternion_wxyz), ("attitude", state.euler_rad if include_euler else ())):
+        _vector(vector, name)
+    if include_rangefinder:
+        _number(state.rangefinder_down_m, "rng_1")
+    if battery_voltage_v is not None:
+        _number(battery_voltage_v, "battery voltage")
+    _vector(wind_ned_m_s or (), "velocity_wind")
 
 
 _FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
