@@ -106,8 +106,10 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     connected_s = None
     if lockstep is not None:
         connected_s = await lockstep.start_at()
-        await vehicle.restart_streams()  # on a schedule from the mission's start, the same in every trial
+        # The companion's HEARTBEAT from here on, none of MAVSDK's: one that reached SITL among the requests
+        # below, at a wall time of MAVSDK's, could put a request's answer a loop later.
         vehicle.keep_heartbeat_in_vehicle_time()
+        await vehicle.restart_streams()  # on a schedule from the mission's start, the same in every trial
     truth_source = None
     if truth:
         truth_source = SimStateTruth(vehicle)
