@@ -304,7 +304,8 @@ class LockstepClock:
         while True:
             remaining_wall_s = deadline_wall_s - time.monotonic()
             if remaining_wall_s < 0:
-                self.unsettled += counted
+                if counted:
+                    self.unsettled += 1
                 return False
             changed = loop.create_future()
             # Registered before the condition is read again: a change made meanwhile on another thread
