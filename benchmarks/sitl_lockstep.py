@@ -6,7 +6,9 @@ spread, whether the repeats are identical (error and flight time to the last dig
 trial's vehicle seconds, from SITL's boot, per wall second), the camera frames read per vehicle second
 while landing, and where the bridge's wall time went: stepping preland's physics, waiting for SITL (its
 own step and the transport), and held for the companion (its readings, camera frames, the settle before
-a wake; `settle` is the part of it spent on that settle). The summary gives the landings, the largest
+a wake; `settle` is the part of it spent on that settle), and `unset`, the wakes and exchanges of the
+repeats that went on at a wall bound instead of at what they waited for (`lockstep_unsettled`: one such can
+part the repeats of a seed). The summary gives the landings, the largest
 spread, and the speeds of the camera land modes and of the others.
 
 Usage: python benchmarks/sitl_lockstep.py [--binary PATH] [--seeds 1 2] [--repeats 3] [--workers 2]
@@ -56,7 +58,8 @@ def _trial(binary: str, name: str, mode: str, sensor: str | None, mission: str, 
             "vehicle_s": d.get("bridge_vehicle_s"),
             "camera_hz": frames / outcome.landing_time_s if frames and outcome.landing_time_s else None,
             "physics_s": d.get("bridge_physics_wall_s"), "waiting_s": d.get("bridge_waiting_wall_s"),
-            "held_s": d.get("lockstep_held_wall_s"), "settle_s": d.get("lockstep_settle_wall_s")}
+            "held_s": d.get("lockstep_held_wall_s"), "settle_s": d.get("lockstep_settle_wall_s"),
+            "unsettled": d.get("lockstep_unsettled") or 0}
 
 
 def _busy() -> None:
@@ -97,7 +100,7 @@ def main() -> int:
             process.terminate()
     elapsed_s = time.perf_counter() - started
     print(f"  {'land mode':<16} {'seed':>4} {'errors cm':<32} {'spread':>7} {'same':>5} {'speed x':>8} "
-          f"{'cam Hz':>7} {'physics':>8} {'SITL':>5} {'held':>5} {'settle':>7}")
+          f"{'cam Hz':>7} {'physics':>8} {'SITL':>5} {'held':>5} {'settle':>7} {'unset':>6}")
     failures: list[str] = []
     spreads: list[float] = []
     for name, _, _, _ in modes:
@@ -116,7 +119,8 @@ def main() -> int:
             text = " ".join(f"{e:.4f}" for e in errors) if errors else "-"
             print(f"  {name:<16} {seed:>4} {text:<32} {spread:>7.3f} {'yes' if same else 'no':>5} {speed:>8.2f} "
                   f"{statistics.median(camera) if camera else float('nan'):>7.1f} {_share(group, 'physics_s'):>8} "
-                  f"{_share(group, 'waiting_s'):>5} {_share(group, 'held_s'):>5} {_share(group, 'settle_s'):>7}")
+                  f"{_share(group, 'waiting_s'):>5} {_share(group, 'held_s'):>5} {_share(group, 'settle_s'):>7} "
+                  f"{sum(r['unsettled'] for r in group):>6}")
     print()
     for line in failures:
         print(f"  not landed: {line}")
