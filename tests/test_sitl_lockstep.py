@@ -246,9 +246,11 @@ def test_an_exchange_runs_time_until_its_answer_is_read_then_holds_until_it_ends
                 await until_async(lambda: clock.now_s() >= start_s + 0.05, timeout_s=30,
                                   what="time to run in the exchange while no answer has come")
                 answered = True
-                clock._update()  # as a wake after the answer's step would
+                clock._apply()  # the hold, as the clock's next look (a wake after the answer's step) sets it
+                # At that hold: the physics may still wait at the one before, which the hold just moved from.
                 await asyncio.get_running_loop().run_in_executor(
-                    None, lambda: until(lambda: bridge.gate.waiting, timeout_s=30, what="the physics at the hold"))
+                    None, lambda: until(lambda: bridge.gate.waiting and bridge.gate.held(), timeout_s=30,
+                                        what="the physics at the hold"))
                 seen["answered_s"] = clock.now_s()
                 await asyncio.sleep(0.2)  # the answer on its way to the task, in wall time
                 seen["before_end_s"] = clock.now_s()
