@@ -260,9 +260,6 @@ class QuadXMultirotor:
         self._yaw_scale_m = 0.05 * f.diagonal_size_m  # SIM_Motor: yaw_scale = 0.05 * diagonal_size * thrust
         # SIM_Frame::calculate_forces: rot_accel -= gyro * radians(400) / refRotRate
         self._rot_damping_1_s = math.radians(400.0) / f.ref_rotation_rate_deg_s
-        span = f.pwm_max_us - f.pwm_min_us  # QuadXFrame.pwm_to_command's, computed once
-        self._pwm_low_us = f.pwm_min_us + f.spin_min * span
-        self._pwm_range_us = (f.pwm_min_us + f.spin_max * span) - self._pwm_low_us
         self._lag_dt_s = math.nan  # the step `_lag` and `_slew` were computed for
         self.reset()
 
@@ -293,13 +290,9 @@ class QuadXMultirotor:
             self._lag = 1.0 if f.motor_time_constant_s <= 0 else 1.0 - math.exp(-dt_s / f.motor_time_constant_s)
             self._slew = f.motor_slew_max_per_s * dt_s if f.motor_slew_max_per_s > 0 else math.inf
         lag, slew = self._lag, self._slew
-        pwm_low, pwm_range = self._pwm_low_us, self._pwm_range_us
-        commands = self._c
-        for i in range(len(commands)):
-            # SIM_Motor::pwm_to_command (QuadXFrame.pwm_to_command), then the lag and the slew limit
-            command = min(max((pwm_us[i] - pwm_low) / pwm_range, 0.0), 1.0)
-            change = (command - commands[i]) * lag
-            commands[i] += min(max(change, -slew), slew)
+        for i in range(len(self._c)):
+            change = (f.pwm_to_command(pwm_us[i]) - self._c[i]) * lag
+            self._c[i] += min(max(change, -slew), slew)  # SIM_Motor's slew limit on the command
 
         w, x, y, z = self._q
         r = rotation_body_to_ned(w, x, y, z)
@@ -315,7 +308,6 @@ class QuadXMultirotor:
               r[0][1] * an_ + r[1][1] * ae_ + r[2][1] * ad_,
               r[0][2] * an_ + r[1][2] * ae_ + r[2][2] * ad_)
         gx, gy, gz = self._w
-        expo = f.thrust_expo
         fx = fy = fz = 0.0
         tx = ty = tz = 0.0
         for (px, py, pz), yaw_factor, c in zip(self._positions, self._yaw_factors, self._c):
@@ -324,8 +316,8 @@ class QuadXMultirotor:
             mvy = vb[1] + gz * px - gx * pz
             mvz = vb[2] + gx * py - gy * px
             inflow = max(0.0, -mvz)  # air entering the rotor when the motor climbs (SIM_Motor)
-            fraction = (1.0 - expo) * c + expo * c * c  # QuadXFrame.thrust_fraction
-            thrust = self._max_thrust_n * (self._voltage_scale_sq * fraction - (inflow / self._max_outflow_m_s) ** 2)
+            thrust = self._max_thrust_n * (self._voltage_scale_sq * f.thrust_fraction(c)
+                                           - (inflow / self._max_outflow_m_s) ** 2)
             k = self._mdrag * math.sqrt(abs(thrust))
             mfx, mfy, mfz = -k * mvx, -k * mvy, -thrust - k * mvz
             fx += mfx

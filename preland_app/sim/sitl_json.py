@@ -98,19 +98,10 @@ def build_servo_packet(*, frame_rate_hz: int, frame_count: int, pwm_us: Sequence
     return _HEADER.pack(magic, frame_rate_hz, frame_count & 0xFFFFFFFF) + struct.pack(f"<{channels}H", *values)
 
 
-def _vector(values: Sequence[float], name: str) -> str:
-    """`values` as a JSON array, each number as json.dumps writes a float (its repr); SitlJsonError for
-    one that is not finite."""
-    for value in values:
-        if not math.isfinite(value):
-            raise SitlJsonError(f"{name} is not finite: {[float(v) for v in values]}")
-    return "[" + ",".join([repr(float(v)) for v in values]) + "]"
-
-
-def _number(value: float, name: str) -> str:
-    if not math.isfinite(value):
-        raise SitlJsonError(f"{name} is not finite: {value}")
-    return repr(float(value))
+def _check_finite(values: Sequence[float], name: str) -> None:
+    """SitlJsonError when one of `values` is not finite."""
+    if not all(map(math.isfinite, values)):
+        raise SitlJsonError(f"{name} is not finite: {[float(v) for v in values]}")
 
 
 def build_reply(state: MultirotorState, *, include_euler: bool = False, include_rangefinder: bool = True,
@@ -161,16 +152,14 @@ def _reply_format(euler: bool, rangefinder: bool, battery: bool, wind: bool) -> 
 def _refuse_not_finite(state: MultirotorState, *, include_euler: bool, include_rangefinder: bool,
                        battery_voltage_v: float | None, wind_ned_m_s: tuple[float, float, float] | None) -> None:
     """SitlJsonError naming the first value of a reply that is not finite."""
-    _number(state.time_s, "timestamp")
-    for name, vector in (("gyro", state.gyro_frd_rad_s), ("accel_body", state.accel_frd_m_s2),
-                         ("position", state.position_ned_m), ("velocity", state.velocity_ned_m_s),
-                         ("quaternion", state.quaternion_wxyz), ("attitude", state.euler_rad if include_euler else ())):
-        _vector(vector, name)
-    if include_rangefinder:
-        _number(state.rangefinder_down_m, "rng_1")
-    if battery_voltage_v is not None:
-        _number(battery_voltage_v, "battery voltage")
-    _vector(wind_ned_m_s or (), "velocity_wind")
+    for name, values in (("timestamp", (state.time_s,)), ("gyro", state.gyro_frd_rad_s),
+                         ("accel_body", state.accel_frd_m_s2), ("position", state.position_ned_m),
+                         ("velocity", state.velocity_ned_m_s), ("quaternion", state.quaternion_wxyz),
+                         ("attitude", state.euler_rad if include_euler else ()),
+                         ("rng_1", (state.rangefinder_down_m,) if include_rangefinder else ()),
+                         ("battery voltage", () if battery_voltage_v is None else (battery_voltage_v,)),
+                         ("velocity_wind", wind_ned_m_s or ())):
+        _check_finite(values, name)
 
 
 _FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"

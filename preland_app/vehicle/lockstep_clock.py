@@ -364,7 +364,7 @@ class LockstepClock:
             self._delivery_look = self._loop.call_later(SETTLE_WALL_S if self._relay is None else LOOK_WALL_S,
                                                         self._look_at_delivery)
         elif not undelivered and self._delivery_look is not None:
-            # Delivered: no look after this one, which would step an exchange on from wherever time is then.
+            # Delivered: no look is needed after this one.
             self._delivery_look.cancel()
             self._delivery_look = None
         if self._holders() or self._sending or undelivered:
