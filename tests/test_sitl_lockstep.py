@@ -113,6 +113,10 @@ def test_smoothed_sensors_tell_a_levelling_touchdown_as_a_rotation():
 def _run_on_played_bridge(main_factory, *, bridge: JsonBridge | None = None, player=_play_sitl) -> JsonBridge:
     """Run `main_factory(bridge)` while `player(bridge, stop)` plays SITL on the bridge."""
     bridge = bridge or JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), port=0)
+    # Held from its first step, as a trial's physics is by the time its mission sleeps: a deadline taken while
+    # the physics runs free may be passed mid-step before the clock holds it, and without `activity` a wake
+    # does not wait for the physics to stand, so what a task reads at its wake could still move by a step.
+    bridge.gate.hold_at(0.0)
     stop = threading.Event()
     thread = player(bridge, stop)
     try:
