@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import select
 import socket
+import struct
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -30,12 +32,16 @@ from ..errors import PrelandError
 from .air import AirAtVehicle
 from .imu import GyroError
 from .multirotor import MultirotorState, QuadXMultirotor
-from .sitl_json import DEFAULT_PORT, SitlJsonError, build_reply, parse_servo_packet
+from .sitl_json import DEFAULT_PORT, SitlJsonError, build_reply, unpack_servo_packet
 from .sensor_smoothing import SensorSmoothing
 from .step_gate import StepGate
 
 _POLL_S = 0.05  # how often a waiting bridge looks at its stop flag (wall s)
 _MAX_PACKET_BYTES = 2048
+# SITL resends a servo packet only after waiting 1 s for its answer (SIM_JSON::recv_fdm: ten 100 ms waits), so
+# an answer that leaves sooner than this after the one before, its physics not held, has no resend to drop
+# before it and the socket is not looked at (wall s).
+_RESEND_LOOK_WALL_S = 0.5
 
 
 class JsonBridgeTimeout(PrelandError):
@@ -91,7 +97,13 @@ class JsonBridge:
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self._sock.bind((host, port))
-        self._sock.settimeout(_POLL_S)
+        if sys.platform == "linux":
+            # A blocking socket whose receive gives up after _POLL_S: one system call a packet each way (a
+            # Python timeout polls before each receive and send), and still a look at the stop flag.
+            seconds, micros = divmod(round(_POLL_S * 1e6), 1_000_000)
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("@ll", seconds, micros))
+        else:
+            self._sock.settimeout(_POLL_S)
         self._readable = select.poll()
         self._readable.register(self._sock, select.POLLIN)
         self.address = self._sock.getsockname()
@@ -105,6 +117,7 @@ class JsonBridge:
         self._dropped = 0
         self._physics_wall_s = self._waiting_wall_s = 0.0
         self._pending: tuple[bytes, object] | None = None  # a datagram read while dropping resends
+        self._held = False  # the step just taken waited at the gate (SITL may have resent meanwhile)
         self.gate = StepGate()
         self._smoothing = SensorSmoothing()  # what SITL is told, as SITL's own physics tells it
         self.error: BaseException | None = None
@@ -155,14 +168,14 @@ class JsonBridge:
         """Answer packets until `stop()`, `max_packets` packets, or JsonBridgeTimeout."""
         served = 0
         deadline = time.monotonic() + self.packet_timeout_s  # wall time bounds the wait only
-        waiting_since = time.perf_counter()
+        waiting_since = replied_at = time.perf_counter()
         while not self._stop.is_set() and (max_packets is None or served < max_packets):
             try:
                 if self._pending is not None:
                     (data, sender), self._pending = self._pending, None
                 else:
                     data, sender = self._sock.recvfrom(_MAX_PACKET_BYTES)
-            except socket.timeout:
+            except (socket.timeout, BlockingIOError):  # no packet within _POLL_S
                 if time.monotonic() > deadline:
                     raise JsonBridgeTimeout(timeout_s=self.packet_timeout_s, packets=self._packets) from None
                 continue
@@ -170,15 +183,15 @@ class JsonBridge:
                 if self._stop.is_set():
                     return  # socket closed by stop()
                 raise
-            deadline = time.monotonic() + self.packet_timeout_s
             received_at = time.perf_counter()
-            with self._lock:
-                self._waiting_wall_s += received_at - waiting_since
-            reply = self.handle(data)
+            deadline = time.monotonic() + self.packet_timeout_s
+            reply = self._handle(data, waited_wall_s=received_at - waiting_since)
             waiting_since = time.perf_counter()  # before the answer leaves: SITL's step starts with it
             if reply is not None:
-                self._drop_resends()
+                if self._held or waiting_since - replied_at >= _RESEND_LOOK_WALL_S:
+                    self._drop_resends()
                 self._sock.sendto(reply, sender)
+                replied_at = waiting_since
             served += 1
 
     def _drop_resends(self) -> None:
@@ -186,7 +199,7 @@ class JsonBridge:
         while self._readable.poll(0):  # only what is there now: no wait, no exception per answer
             data, sender = self._sock.recvfrom(_MAX_PACKET_BYTES)
             try:
-                repeat = parse_servo_packet(data).frame_count == self._last_frame
+                repeat = unpack_servo_packet(data)[2] == self._last_frame
             except SitlJsonError:
                 repeat = False
             if not repeat:
@@ -197,38 +210,45 @@ class JsonBridge:
 
     def handle(self, data: bytes) -> bytes | None:
         """The reply to one datagram (None for one that is not a servo packet); steps the model."""
+        return self._handle(data, waited_wall_s=0.0)
+
+    def _handle(self, data: bytes, *, waited_wall_s: float) -> bytes | None:
+        """`handle`, counting `waited_wall_s` (the wall s the datagram was waited for) in `waiting_wall_s`."""
         try:
-            packet = parse_servo_packet(data)
+            _, frame_rate_hz, frame_count, pwm_us = unpack_servo_packet(data)
         except SitlJsonError:
             with self._lock:
                 self._bad += 1
+                self._waiting_wall_s += waited_wall_s
             return None
         with self._lock:
+            self._waiting_wall_s += waited_wall_s
             self._packets += 1
             last = self._last_frame
-            if last is not None and packet.frame_count == last:
+            if last is not None and frame_count == last:
                 self._repeats += 1
                 return self._last_reply
-            if last is not None and packet.frame_count < last:
+            if last is not None and frame_count < last:
                 self.model.reset()  # SITL restarted: so does the physics
                 self._smoothing.reset()
                 self._resets += 1
-            elif last is not None and packet.frame_count > last + 1:
-                self._skipped += packet.frame_count - last - 1
-        if last is not None and packet.frame_count < last:
+            elif last is not None and frame_count > last + 1:
+                self._skipped += frame_count - last - 1
+        if last is not None and frame_count < last:
             self.gate.reset()
-        self.gate.wait_to_step(stop=self._stop)  # held for a reading at this time: SITL waits with us
+        # Held for a reading at this time: SITL waits with us (and may resend meanwhile).
+        self._held = self.gate.wait_to_step(stop=self._stop)
         stepping_at = time.perf_counter()
+        dt_s = 1.0 / frame_rate_hz
         with self._lock:
             wind = None if self.air is None else self.air.step(
-                dt_s=packet.dt_s, height_m=self.model.height_above_ground_m,
-                velocity_ned_m_s=self.model.velocity_ned_m_s)
-            state = self.model.step(packet.pwm_us, packet.dt_s, wind or (0.0, 0.0, 0.0))
+                dt_s=dt_s, height_m=self.model.height_above_ground_m, velocity_ned_m_s=self.model.velocity_ned_m_s)
+            state = self.model.step(pwm_us, dt_s, wind or (0.0, 0.0, 0.0))
             self._steps += 1
-            self._last_frame = packet.frame_count
+            self._last_frame = frame_count
             told = self._smoothing.smoothed(state)
             if self.gyro_error is not None:
-                told = self.gyro_error.applied(told, packet.dt_s)
+                told = self.gyro_error.applied(told, dt_s)
             self._last_reply = build_reply(told, include_rangefinder=self._send_rangefinder,
                                            battery_voltage_v=self._battery_voltage_v, wind_ned_m_s=wind).encode()
             self._latest = state

@@ -42,7 +42,10 @@ MAGIC_16 = 18458  # SIM_JSON.h servo_packet_16
 MAGIC_32 = 29569  # SIM_JSON.h servo_packet_32
 _HEADER = struct.Struct("<HHI")
 _CHANNELS_BY_MAGIC = {MAGIC_16: 16, MAGIC_32: 32}
-_PWM_BY_MAGIC = {magic: struct.Struct(f"<{channels}H") for magic, channels in _CHANNELS_BY_MAGIC.items()}
+# A whole packet of each magic, by its size in bytes, read in one unpack.
+_PACKET_BY_SIZE = {_HEADER.size + 2 * channels: struct.Struct(f"<HHI{channels}H")
+                   for channels in _CHANNELS_BY_MAGIC.values()}
+_MAGIC_BY_SIZE = {_HEADER.size + 2 * channels: magic for magic, channels in _CHANNELS_BY_MAGIC.items()}
 DEFAULT_PORT = 9002  # SITL_cmdline.cpp SIM_OUT_PORT; instance N uses 9002 + 10 N
 
 # SIM_JSON.h keytable: (section, key, required)
@@ -73,6 +76,20 @@ class ServoPacket:
 
 def parse_servo_packet(data: bytes) -> ServoPacket:
     """Decode one servo packet (either magic); SitlJsonError when it is not one."""
+    magic, frame_rate_hz, frame_count, pwm = unpack_servo_packet(data)
+    return ServoPacket(magic=magic, frame_rate_hz=frame_rate_hz, frame_count=frame_count, pwm_us=pwm)
+
+
+def unpack_servo_packet(data: bytes) -> tuple[int, int, int, tuple[int, ...]]:
+    """(magic, frame_rate_hz, frame_count, pwm_us) of one servo packet, as `parse_servo_packet` reads it,
+    without building a `ServoPacket` (the bridge reads one per physics step); SitlJsonError when it is not
+    one."""
+    whole = _PACKET_BY_SIZE.get(len(data))
+    if whole is not None:
+        magic, frame_rate_hz, frame_count, *pwm = whole.unpack(data)
+        if magic == _MAGIC_BY_SIZE[len(data)] and frame_rate_hz != 0:
+            return magic, frame_rate_hz, frame_count, tuple(pwm)
+    # Not a well-formed packet of either size: say what is wrong with it.
     if len(data) < _HEADER.size:
         raise SitlJsonError(f"servo packet of {len(data)} bytes is shorter than its header")
     magic, frame_rate_hz, frame_count = _HEADER.unpack_from(data)
@@ -82,10 +99,7 @@ def parse_servo_packet(data: bytes) -> ServoPacket:
     expected = _HEADER.size + 2 * channels
     if len(data) != expected:
         raise SitlJsonError(f"servo packet with magic {magic} has {len(data)} bytes, not {expected}")
-    if frame_rate_hz == 0:
-        raise SitlJsonError("servo packet with frame rate 0")
-    pwm = _PWM_BY_MAGIC[magic].unpack_from(data, _HEADER.size)
-    return ServoPacket(magic=magic, frame_rate_hz=frame_rate_hz, frame_count=frame_count, pwm_us=pwm)
+    raise SitlJsonError("servo packet with frame rate 0")
 
 
 def build_servo_packet(*, frame_rate_hz: int, frame_count: int, pwm_us: Sequence[int]) -> bytes:

@@ -70,10 +70,10 @@ class StepGate:
         hold = self._hold_at_s
         return hold is not None and self._time_s >= hold - REACHED_S
 
-    def wait_to_step(self, *, stop: threading.Event) -> None:
-        """Return when the physics may take its next step, or when `stop` is set."""
+    def wait_to_step(self, *, stop: threading.Event) -> bool:
+        """Return when the physics may take its next step, or when `stop` is set: True if it was held."""
         if not self.held():
-            return
+            return False
         started_wall_s = time.monotonic()
         self.holds += 1
         with self._condition:
@@ -84,6 +84,7 @@ class StepGate:
                 self._condition.wait(_POLL_WALL_S)
             self.waiting = False
         self.held_wall_s += time.monotonic() - started_wall_s
+        return True
 
     def stepped(self, time_s: float) -> None:
         """The physics is now at `time_s` (vehicle s): tell whoever waits for a deadline it reached."""
