@@ -43,11 +43,14 @@ def test_servo_packets_of_both_magics_parse():
     assert build_servo_packet(frame_rate_hz=1200, frame_count=77, pwm_us=range(1000, 1016)) == raw16
 
 
-@pytest.mark.parametrize("raw", [b"", struct.pack("<HHI16H", 1234, 1200, 0, *[1000] * 16),
-                                 struct.pack("<HHI16H", MAGIC_32, 1200, 0, *[1000] * 16),
-                                 struct.pack("<HHI16H", MAGIC_16, 0, 0, *[1000] * 16)])
-def test_what_is_not_a_servo_packet_is_refused(raw):
-    with pytest.raises(SitlJsonError):
+@pytest.mark.parametrize("raw, why", [
+    (b"", "0 bytes is shorter than its header"),
+    (struct.pack("<HHI16H", 1234, 1200, 0, *[1000] * 16), "magic 1234 is neither"),
+    (struct.pack("<HHI16H", MAGIC_32, 1200, 0, *[1000] * 16), f"magic {MAGIC_32} has 40 bytes, not 72"),
+    (struct.pack("<HHI32H", MAGIC_16, 1200, 0, *[1000] * 32), f"magic {MAGIC_16} has 72 bytes, not 40"),
+    (struct.pack("<HHI16H", MAGIC_16, 0, 0, *[1000] * 16), "frame rate 0")])
+def test_what_is_not_a_servo_packet_is_refused(raw, why):
+    with pytest.raises(SitlJsonError, match=why):
         parse_servo_packet(raw)
     assert issubclass(SitlJsonError, PrelandError)
 
