@@ -19,7 +19,7 @@ from preland_app.sim.params import ARDUCOPTER_PARAMS, ARDUPILOT_PARAM_NAMES, Par
 from preland_app.sim.simulator import Simulator
 
 from .conftest import THESIS_MISSION
-from .test_mavlink_face import command, free_port, serving, wait_for
+from .test_mavlink_face import command, free_port, position_estimate_ready, serving, wait_for
 from .waiting import until
 
 EMBEDDED_ONLY = ("PRL_LOST_HOLD", "PRL_RET_ALT", "PRL_FS_HOLD")
@@ -196,7 +196,7 @@ def test_ftp_is_refused_at_once_with_a_nak():
 def test_poshold_is_accepted_and_holds_position():
     with serving(1, speedup=25.0) as ((client,), simulator, _):
         wait_for(client, "HEARTBEAT")
-        wait_for(client, "HEARTBEAT", condition=lambda m: simulator.nav.position_ok)
+        wait_for(client, "HEARTBEAT", condition=lambda m: position_estimate_ready(simulator))
         assert command(client, mavlink2.MAV_CMD_DO_SET_MODE, 1, 4).result == mavlink2.MAV_RESULT_ACCEPTED
         assert command(client, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink2.MAV_RESULT_ACCEPTED
         assert command(client, mavlink2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 5).result == \
