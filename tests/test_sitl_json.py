@@ -5,8 +5,8 @@ from __future__ import annotations
 import json
 import math
 import socket
-import time
 import struct
+import time
 
 import pytest
 
@@ -218,6 +218,51 @@ def test_resends_sitl_made_while_the_bridge_was_held_are_dropped_and_answered_on
         counters = bridge.counters
         assert counters.resends_dropped == 2 and counters.steps == 3 and counters.repeats == 0
     finally:
+        sitl.close()
+        bridge.stop()
+
+
+def test_resends_sitl_made_while_a_step_was_late_are_dropped_too(monkeypatch):
+    """Not held, but late (a stalled thread, a loaded machine): an answer that leaves _RESEND_LOOK_WALL_S or
+    more after the one before looks for resends first, as one after a hold does."""
+    import threading
+
+    from preland_app.sim import json_bridge
+
+    from .waiting import until
+
+    monkeypatch.setattr(json_bridge, "_RESEND_LOOK_WALL_S", 0.2)
+    bridge = JsonBridge(model=QuadXMultirotor(), port=0, packet_timeout_s=10.0).start()
+    sitl = StandInSitl(bridge.address)
+    stepping, go_on = threading.Event(), threading.Event()
+    model_step = bridge.model.step
+
+    def late_step(*args):
+        if not go_on.is_set():  # frame 1: the step stands until the resends are in the bridge's socket
+            stepping.set()
+            assert go_on.wait(10.0), "the test to let the step go on"
+        return model_step(*args)
+
+    try:
+        pwm = [1000] * 16
+        sitl.exchange(0, pwm)
+        replied = time.monotonic()
+        bridge.model.step = late_step
+        packet = build_servo_packet(frame_rate_hz=RATE_HZ, frame_count=1, pwm_us=pwm)
+        sitl.sock.sendto(packet, bridge.address)
+        assert stepping.wait(10.0), "the bridge to step frame 1"
+        for _ in range(2):  # two resends, while the bridge steps frame 1 (in its socket once sent: loopback)
+            sitl.sock.sendto(packet, bridge.address)
+        until(lambda: time.monotonic() - replied >= 0.2, timeout_s=10.0, what="the answer to be late")
+        go_on.set()
+        first = json.loads(sitl.sock.recvfrom(65000)[0].decode())
+        assert first["timestamp"] == pytest.approx(2 * DT_S, abs=1e-9)
+        following = sitl.exchange(2, pwm)  # the next answer is frame 2's: no stale frame-1 answer between
+        assert following["timestamp"] == pytest.approx(3 * DT_S, abs=1e-9)
+        counters = bridge.counters
+        assert counters.resends_dropped == 2 and counters.steps == 3 and counters.repeats == 0 and counters.holds == 0
+    finally:
+        go_on.set()
         sitl.close()
         bridge.stop()
 
