@@ -12,7 +12,8 @@ physics: wall time is used only to bound how long the bridge waits for a packet.
 `gate` (a `StepGate`) lets the companion hold the physics at a vehicle time (a camera frame's, an
 IR-LOCK reading's) until it has made that reading and sent its LANDING_TARGET: the packet that would step
 past it waits. Datagrams SITL resent meanwhile (the same frame_count, after 1 s without an answer) are
-dropped once the answer leaves, so SITL gets one answer per frame and never reads a stale one later.
+dropped before the answer leaves, so SITL gets one answer per frame and never reads a stale one later; the
+socket is looked at for them only after a held step or an answer late by half SITL's resend time.
 
 SITL is told the model's state through `SensorSmoothing` (SITL's own smooth_sensors), its body rates
 with `gyro_error` (`sim/imu.py`) when given; `latest_state` stays the model's true state.
