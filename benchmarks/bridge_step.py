@@ -46,10 +46,15 @@ def packets(steps: int) -> list[bytes]:
     return out
 
 
-def run(steps: list[bytes]) -> tuple[float, str]:
+def new_bridge() -> JsonBridge:
+    """A bridge in the thesis mission's weather, its air from seed 1."""
     mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
-    bridge = JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), port=0,
-                        air=AirAtVehicle(environment=mission.environment, seed=1))
+    return JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), port=0,
+                      air=AirAtVehicle(environment=mission.environment, seed=1))
+
+
+def run(steps: list[bytes]) -> tuple[float, str]:
+    bridge = new_bridge()
     digest = hashlib.sha256()
     try:
         started = time.perf_counter()
@@ -80,9 +85,7 @@ print(digest.hexdigest()[:16], flush=True)
 
 def served(steps: int) -> tuple[float, float, str]:
     """(CPU s and wall s of the serving thread per step, the hash of the answers the other process read)."""
-    mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
-    bridge = JsonBridge(model=QuadXMultirotor(frame=QuadXFrame()), port=0,
-                        air=AirAtVehicle(environment=mission.environment, seed=1))
+    bridge = new_bridge()
     client = subprocess.Popen([sys.executable, "-c", _CLIENT, str(ROOT), str(bridge.address[1]), str(steps)],
                               stdout=subprocess.PIPE, text=True)
     try:

@@ -42,10 +42,9 @@ MAGIC_16 = 18458  # SIM_JSON.h servo_packet_16
 MAGIC_32 = 29569  # SIM_JSON.h servo_packet_32
 _HEADER = struct.Struct("<HHI")
 _CHANNELS_BY_MAGIC = {MAGIC_16: 16, MAGIC_32: 32}
-# A whole packet of each magic, by its size in bytes, read in one unpack.
-_PACKET_BY_SIZE = {_HEADER.size + 2 * channels: struct.Struct(f"<HHI{channels}H")
-                   for channels in _CHANNELS_BY_MAGIC.values()}
-_MAGIC_BY_SIZE = {_HEADER.size + 2 * channels: magic for magic, channels in _CHANNELS_BY_MAGIC.items()}
+# By a packet's size in bytes: its magic, and the whole packet read in one unpack.
+_PACKET_BY_SIZE = {_HEADER.size + 2 * channels: (magic, struct.Struct(f"<HHI{channels}H"))
+                   for magic, channels in _CHANNELS_BY_MAGIC.items()}
 DEFAULT_PORT = 9002  # SITL_cmdline.cpp SIM_OUT_PORT; instance N uses 9002 + 10 N
 
 # SIM_JSON.h keytable: (section, key, required)
@@ -84,10 +83,10 @@ def unpack_servo_packet(data: bytes) -> tuple[int, int, int, tuple[int, ...]]:
     """(magic, frame_rate_hz, frame_count, pwm_us) of one servo packet, as `parse_servo_packet` reads it,
     without building a `ServoPacket` (the bridge reads one per physics step); SitlJsonError when it is not
     one."""
-    whole = _PACKET_BY_SIZE.get(len(data))
-    if whole is not None:
-        magic, frame_rate_hz, frame_count, *pwm = whole.unpack(data)
-        if magic == _MAGIC_BY_SIZE[len(data)] and frame_rate_hz != 0:
+    sized = _PACKET_BY_SIZE.get(len(data))
+    if sized is not None:
+        magic, frame_rate_hz, frame_count, *pwm = sized[1].unpack(data)
+        if magic == sized[0] and frame_rate_hz != 0:
             return magic, frame_rate_hz, frame_count, tuple(pwm)
     # Not a well-formed packet of either size: say what is wrong with it.
     if len(data) < _HEADER.size:
