@@ -21,7 +21,7 @@ def test_camera_land_modes_over_mavlink(short_mission, mode, faults):
     # thesis mission made short (from 5 m): the camera's work is the landing's.
     outcome, served = fly_paced(short_mission, seed=4, land_mode=mode, faults=faults)
     assert outcome.outcome is Outcome.LANDED, outcome.message
-    assert outcome.landing_error_cm < 15.0
+    assert outcome.landing_error_cm < 15.0, (outcome.events, outcome.details)
     assert served.face.landing_targets == outcome.details["landing_targets_sent"] > 100
     # Every frame at its vehicle time: the camera's 15 frames a second of the landing, none waited for truth.
     assert outcome.details["ticks_without_new_truth"] <= 1
