@@ -41,7 +41,8 @@ from pymavlink import mavutil  # noqa: E402
 from scipy import stats  # noqa: E402
 from sitl_vs_embedded import fly_one  # noqa: E402
 
-from preland_app.runtime.sitl import PACKAGED_DEFAULTS, find_copter_defaults  # noqa: E402
+from preland_app.runtime.sitl import (JSON_QUADX_DEFAULTS, PACKAGED_DEFAULTS, find_copter_defaults,  # noqa: E402
+                                      read_parm_file)
 from preland_app.sim.json_bridge import JsonBridge  # noqa: E402
 from preland_app.sim.multirotor import QuadXFrame, QuadXMultirotor  # noqa: E402
 
@@ -55,11 +56,9 @@ SETTLED_M = 0.1
 GPS_ONLY_LABEL = "T3 none"  # fault_scenarios_table.py's Table 3 scenario flown with land mode normal
 LANDING_RUNTIMES = (("sitl-preland", "JSON (preland quad X)"), ("sitl", "built-in --model + (ArduPilot's)"))
 POSITION_ONLY_MASK = 0b0000_1111_1111_1000  # SET_POSITION_TARGET_*: position only, no yaw
-# Parameters the JSON frame adds to copter.parm. copter.parm sets FRAME_TYPE 0 (plus), the frame of
-# `--model quad` (SIM_Frame.cpp: "quad" is quad_plus_motors); the JSON model is quad X (FRAME_TYPE 1,
-# AP_Motors::MOTOR_FRAME_TYPE_X). Mixed as plus, the X airframe's roll and pitch couple at 45 degrees
-# and ArduCopter holds it only in a saturated 15 Hz whirl.
-JSON_EXTRA_PARAMS: dict[str, float] = {"FRAME_TYPE": 1}
+# Parameters the JSON frame adds to copter.parm: the SITL runtime's own file for preland's physics (the quad X
+# frame, SIM_RATE_HZ, ARMING_CHECK), so the frame flown here is the one trials fly.
+JSON_EXTRA_PARAMS: dict[str, float] = read_parm_file(JSON_QUADX_DEFAULTS)
 
 
 @dataclass
