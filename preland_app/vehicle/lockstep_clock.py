@@ -59,9 +59,10 @@ if TYPE_CHECKING:
 PHYSICS_STALL_WALL_S = 10.0
 _CHECK_WALL_S = 1.0  # how often a sleeper looks whether the physics' time still moves (wall s)
 # The vehicle time at which a lock-step trial's mission begins: after SITL's boot and the companion's
-# connection (a few vehicle s), before ArduCopter can arm (about 40 s on the copter defaults, for its EKF
-# and GPS), so every trial begins at the same vehicle time however long the connection took in wall time.
-MISSION_START_S = 15.0
+# connection, before ArduCopter can arm (about 42 s on the copter defaults, for its EKF and GPS), so every
+# trial begins at the same vehicle time however long the connection took in wall time. SITL runs free
+# while MAVSDK connects on its wall-clock timers: 15 to 20 vehicle s on 2 cores at 400 Hz physics steps.
+MISSION_START_S = 30.0
 # While a task waits for SITL's answer, time passes in steps of ArduCopter's main loop (400 Hz), so the
 # answer is seen within one loop of its sending (vehicle s).
 EXCHANGE_STEP_S = 0.0025
