@@ -390,6 +390,19 @@ def test_the_thesis_mission_lands_on_preland_physics_on_real_sitl(thesis_mission
 
 
 @needs_real_sitl
+def test_a_seed_flown_twice_on_preland_physics_lands_on_the_same_point_on_real_sitl(thesis_mission):
+    # In lock-step the companion's wall time decides nothing after the mission's start, which the connection
+    # must reach first (at 400 Hz physics steps SITL ran 15 to 20 vehicle s while MAVSDK connected).
+    first, second = (run_sitl_trial(TrialRequest(mission=thesis_mission, seed=1, land_mode="irlock"),
+                                    options=_real(physics="preland")) for _ in range(2))
+    for outcome in (first, second):
+        assert outcome.outcome is Outcome.LANDED, outcome.message
+        assert outcome.details["lockstep_connected_s"] < MISSION_START_S
+    assert first.landing_error_cm == second.landing_error_cm and first.landing_time_s == second.landing_time_s
+    assert [(e.kind, e.time_s) for e in first.events] == [(e.kind, e.time_s) for e in second.events]
+
+
+@needs_real_sitl
 def test_a_gyro_error_on_preland_physics_makes_arducopters_attitude_estimate_err(thesis_mission, tmp_path):
     from preland_app.runtime.sitl_log import attitude_estimate_errors_deg, rms
 
