@@ -1,5 +1,5 @@
 """Wall time of one physics step of the JSON bridge (`sim/json_bridge.py`), the part of lock-step SITL on
-preland's physics that runs once per servo packet (SIM_RATE_HZ a vehicle second, 400): parsing the
+preland's physics that runs once per servo packet (the runtime's SIM_RATE_HZ a vehicle second): parsing the
 packet, the air (wind and gusts), the motor-level quad X, SITL's sensor smoothing and the reply's text.
 
 No SITL is needed: the bridge answers a fixed sequence of servo packets (a climb on unequal motors, then a
@@ -28,7 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from preland_app.config.mission import load_mission  # noqa: E402
-from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS, read_parm_file  # noqa: E402
+from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS  # noqa: E402
+from preland_app.runtime.sitl_parm import read_parm_file  # noqa: E402
 from preland_app.sim.air import AirAtVehicle  # noqa: E402
 from preland_app.sim.json_bridge import JsonBridge  # noqa: E402
 from preland_app.sim.multirotor import QuadXFrame, QuadXMultirotor  # noqa: E402

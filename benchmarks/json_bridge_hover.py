@@ -41,8 +41,8 @@ from pymavlink import mavutil  # noqa: E402
 from scipy import stats  # noqa: E402
 from sitl_vs_embedded import fly_one  # noqa: E402
 
-from preland_app.runtime.sitl import (JSON_QUADX_DEFAULTS, PACKAGED_DEFAULTS, find_copter_defaults,  # noqa: E402
-                                      read_parm_file)
+from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS, PACKAGED_DEFAULTS, find_copter_defaults  # noqa: E402
+from preland_app.runtime.sitl_parm import read_parm_file  # noqa: E402
 from preland_app.sim.json_bridge import JsonBridge  # noqa: E402
 from preland_app.sim.multirotor import QuadXFrame, QuadXMultirotor  # noqa: E402
 

@@ -17,7 +17,8 @@ from typer.testing import CliRunner
 from preland_app.cli import app
 from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
-from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS, SITL_ENV, SitlOptions, read_parm_file, run_sitl_trial
+from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS, SITL_ENV, SitlOptions, run_sitl_trial
+from preland_app.runtime.sitl_parm import read_parm_file
 from preland_app.vehicle.lockstep_clock import MISSION_START_S
 
 from .conftest import ROOT, THESIS_MISSION
@@ -296,7 +297,7 @@ def test_a_physics_other_than_ardupilot_or_preland_is_refused_in_one_line(fake_s
 
 def test_a_defaults_file_is_read_as_sitl_reads_it(tmp_path):
     parm = tmp_path / "a.parm"
-    parm.write_text("# a comment\nSIM_RATE_HZ 800\nFRAME_TYPE,1  # trailing comment\n\nSIM_RATE_HZ   400\n")
+    parm.write_text("# a comment\nSIM_RATE_HZ 800\nFRAME_TYPE,1  # trailing comment\n\nSIM_RATE_HZ   400\nALONE\n")
     assert read_parm_file(parm) == {"SIM_RATE_HZ": 400.0, "FRAME_TYPE": 1.0}
     # preland's physics: one step per 400 Hz loop, and every Copter pre-arm check but INS (bit 4).
     frame = read_parm_file(JSON_QUADX_DEFAULTS)

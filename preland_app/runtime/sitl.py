@@ -125,17 +125,6 @@ def resolve_sitl_binary(path: str | Path | None) -> Path:
     return binary
 
 
-def read_parm_file(path: Path) -> dict[str, float]:
-    """The parameters a defaults file sets, by name: `NAME VALUE` (or `NAME,VALUE`) lines, `#` comments, as
-    AP_Param::load_defaults_file reads them; a later line for a name wins."""
-    values: dict[str, float] = {}
-    for line in Path(path).read_text().splitlines():
-        fields = line.split("#", 1)[0].replace(",", " ").split()
-        if len(fields) == 2:
-            values[fields[0]] = float(fields[1])
-    return values
-
-
 def find_copter_defaults(binary: Path) -> Path | None:
     """ArduPilot's copter.parm for a binary inside an ArduPilot tree (build/sitl/bin/arducopter), else None."""
     for folder in Path(binary).resolve().parents:

@@ -49,6 +49,7 @@ from preland_app.clock_scaled import ScaledWallClock  # noqa: E402
 from preland_app.geo import GeoPoint  # noqa: E402
 from preland_app.sim.mavlink_face import MavlinkFace  # noqa: E402
 from preland_app.errors import CommandDenied  # noqa: E402
+from preland_app.runtime.sitl_parm import read_parm_file  # noqa: E402
 from preland_app.sim.params import ARDUCOPTER_PARAMS  # noqa: E402
 from preland_app.sim.simulator import Simulator  # noqa: E402
 from preland_app.sim.multirotor import QuadXFrame  # noqa: E402
@@ -200,10 +201,7 @@ def main(args: argparse.Namespace) -> None:
     # the others (compass offsets, RC calibration, SIM_*) are taken and ignored, as SITL would use them.
     given = {}
     for path in filter(None, args.defaults.split(",")):
-        for line in Path(path).read_text().splitlines():
-            fields = line.split()
-            if len(fields) >= 2 and not fields[0].startswith("#"):
-                given[fields[0]] = float(fields[1])
+        given.update(read_parm_file(Path(path)))
     params = {name: value for name, value in given.items() if name in ARDUCOPTER_PARAMS}
     lat, lon, alt, heading = (float(v) for v in args.home.split(","))
     simulator = Simulator(seed=args.instance, origin=GeoPoint(lat, lon, alt), params=params, initial_yaw_deg=heading)
