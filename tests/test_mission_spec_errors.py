@@ -33,6 +33,9 @@ CASES = {
                      "expected a list of 2 values"),
     "unknown_param": (GOOD + "params:\n  LAND_SPEEED: 30\n", "params.LAND_SPEEED", "unknown autopilot parameter"),
     "top_level_list": ("- 1\n- 2\n", "", "expected a mapping at the top level"),
+    # YAML reads an unquoted 4.6 as a number, which names no release: the line says which names do.
+    "firmware_as_number": (GOOD + "environment:\n  autopilot:\n    firmware: 4.6\n", "environment.autopilot.firmware",
+                           "one of copter-4.0, copter-4.6"),
     "misspelt_detector_parameter": (GOOD + "sensors:\n  marker:\n    detector: {adaptivethreshwinsizemax: 13}\n",
                                     "sensors.marker.detector.adaptivethreshwinsizemax",
                                     "did you mean adaptiveThreshWinSizeMax?"),

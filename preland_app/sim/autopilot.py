@@ -31,6 +31,7 @@ from .navigation import NavEstimate
 from .params import ParameterTable
 from .precland import PrecisionLandingEstimator
 from .precland_retry import Action, LandingRetry
+from .spec import Firmware
 
 LAND_DETECTOR_TRIGGER_S = 1.0  # ArduCopter LAND_DETECTOR_TRIGGER_SEC
 LAND_DETECTOR_MAYBE_TRIGGER_S = 0.2  # LAND_DETECTOR_MAYBE_TRIGGER_SEC
@@ -77,8 +78,11 @@ class StatusText:
 class Autopilot:
     """The flight-control logic. One instance per simulated vehicle."""
 
-    def __init__(self, *, params: ParameterTable, initial_yaw_rad: float = 0.0) -> None:
+    def __init__(self, *, params: ParameterTable, initial_yaw_rad: float = 0.0,
+                 firmware: Firmware = Firmware.COPTER_4_0) -> None:
+        """`firmware`: the ArduCopter release whose precision landing this follows (`sim.spec.Firmware`)."""
         self.params = params
+        self.firmware = firmware
         self.mode = FlightMode.STABILIZE
         self.armed = False
         self.land_complete = True
@@ -88,7 +92,7 @@ class Autopilot:
         self.home_down_m = 0.0
         self.messages: list[StatusText] = []
         self.landing_targets_received = 0
-        self.precland = PrecisionLandingEstimator(params)
+        self.precland = PrecisionLandingEstimator(params, firmware=firmware)
         self.retry = LandingRetry(params)
         self._precland_active = False
         self._retry_hold: tuple[float, float, float] | None = None
@@ -292,7 +296,9 @@ class Autopilot:
                                       height_m=self.height_above_ground_m(),
                                       roll_rad=self.roll_rad + nav.roll_error_rad,
                                       pitch_rad=self.pitch_rad + nav.pitch_error_rad,
-                                      yaw_rad=yaw_rad + nav.heading_error_rad, gyro_rad_s=gyro_rad_s)
+                                      yaw_rad=yaw_rad + nav.heading_error_rad, gyro_rad_s=gyro_rad_s,
+                                      velocity_ne_m_s=(nav.velocity_north_m_s, nav.velocity_east_m_s))
+            self.precland.update(now_s)
         if not self.armed:
             self.last_climb_demand_m_s = 0.0
             return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
@@ -472,9 +478,12 @@ class Autopilot:
                 self._target_north_m, self._target_east_m = target
                 climb_rate = self._precland_descent_rate_m_s(nav, target, climb_rate)
                 # ArduCopter 3.6/4.0 (the thesis' autopilot) feeds the xy velocity loop with the
-                # estimator's target-relative velocity instead of the EKF's (override_vehicle_velocity_xy).
+                # estimator's target-relative velocity instead of the EKF's (override_vehicle_velocity_xy);
+                # 4.1 and later leave it on the EKF's (input_pos_vel_accel_xy).
                 relative_velocity = self.precland.relative_velocity_m_s(self._now_s)
-                feedback = None if relative_velocity is None else (-relative_velocity[0], -relative_velocity[1])
+                feedback = None
+                if relative_velocity is not None and self.firmware is Firmware.COPTER_4_0:
+                    feedback = (-relative_velocity[0], -relative_velocity[1])
                 # PLND_OPTIONS bit 0 (moving target): the target's estimated ground velocity is the
                 # velocity feed-forward (AC_PrecLand::get_target_velocity_cms); otherwise it is zero.
                 target_velocity = (0.0, 0.0)

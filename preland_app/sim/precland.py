@@ -19,6 +19,12 @@ measurement, ungated. The target's position for the controller is the vehicle's
 position estimate plus the relative estimate, so GPS noise does not move the target.
 Measurements older than 1 s are dropped; the target counts as lost 2 s after the
 last one.
+
+`firmware` chooses between ArduCopter releases (`sim.spec.Firmware`). As 3.6/4.0, the thesis' (the default):
+the filter starts at zero relative velocity and the target is used from its first reading. As 4.1 and later
+(4.6): the filter starts at minus the vehicle's velocity PLND_LAG ago with a variance of 2^2 (m/s)^2, fuses
+readings from the first, and the target is used only once 2 s of readings have come without a gap over
+0.5 s (a longer gap restarts that wait at the next reading).
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from dataclasses import dataclass
 
 from ..vehicle.types import LandingTarget
 from .params import ParameterTable
+from .spec import Firmware
 
 MEASUREMENT_MAX_AGE_S = 1.0
 TARGET_LOST_AFTER_S = 2.0
@@ -40,6 +47,11 @@ PLND_LAG_MAX_S = 0.25
 # outliers in a row the next measurement is fused whatever its NIS (so a target that really moved is followed).
 OUTLIER_NIS_MAX = 3.0
 OUTLIER_REJECT_LIMIT = 3
+# ArduCopter 4.1+ (AC_PrecLand.cpp): EKF_INIT_TIME_MS of readings, none more than EKF_INIT_SENSOR_MIN_UPDATE_MS
+# apart, before the target is used; its filter starts at minus the vehicle's velocity with 2^2 (m/s)^2.
+INIT_TIME_S = 2.0
+INIT_MAX_GAP_S = 0.5
+INIT_VELOCITY_VARIANCE = 2.0 ** 2
 
 
 @dataclass(slots=True)
@@ -51,6 +63,8 @@ class _PoseSample:
     roll_rad: float
     pitch_rad: float
     yaw_rad: float
+    velocity_north_m_s: float
+    velocity_east_m_s: float
 
 
 class _AxisFilter:
@@ -58,12 +72,11 @@ class _AxisFilter:
 
     __slots__ = ("position", "velocity", "p00", "p01", "p11")
 
-    def __init__(self, position: float, variance: float) -> None:
+    def __init__(self, position: float, variance: float, *, velocity: float = 0.0,
+                 velocity_variance: float = 1.0) -> None:
         self.position = position
-        self.velocity = 0.0
-        # Zero velocity with 1 (m/s)^2. AC_PrecLand (3.6/4.0) starts at minus the vehicle's velocity with
-        # 2^2: a departure that the docs name (explanation, "Departures from the sources").
-        self.p00, self.p01, self.p11 = variance, 0.0, 1.0
+        self.velocity = velocity
+        self.p00, self.p01, self.p11 = variance, 0.0, velocity_variance
 
     def predict(self, dt_s: float, delta_velocity: float, delta_velocity_noise: float) -> None:
         self.position += self.velocity * dt_s
@@ -92,8 +105,14 @@ class _AxisFilter:
 class PrecisionLandingEstimator:
     """Tracks the landing target from LANDING_TARGET messages. NED, metres, the autopilot's estimate frame."""
 
-    def __init__(self, params: ParameterTable) -> None:
+    def __init__(self, params: ParameterTable, *, firmware: Firmware = Firmware.COPTER_4_0) -> None:
         self.params = params
+        self.firmware = firmware
+        # Whether the target is used (while its last reading is under TARGET_LOST_AFTER_S old); 4.1+: readings
+        # are being fused, since `_init_s`, but the target is not used yet.
+        self._acquired = False
+        self._initialising = False
+        self._init_s = 0.0
         self._history: deque[_PoseSample] = deque()
         self._filters: tuple[_AxisFilter, _AxisFilter] | None = None
         self._raw_rel: tuple[float, float] | None = None
@@ -109,13 +128,18 @@ class PrecisionLandingEstimator:
         self._filters = None
         self._raw_rel = None
         self._last_update_s = None
+        self._acquired = False
+        self._initialising = False
 
     def record_pose(self, sample_time_s: float, *, north_m: float, east_m: float, height_m: float,
-                    roll_rad: float, pitch_rad: float, yaw_rad: float, gyro_rad_s: float = 0.0) -> None:
+                    roll_rad: float, pitch_rad: float, yaw_rad: float, gyro_rad_s: float = 0.0,
+                    velocity_ne_m_s: tuple[float, float] = (0.0, 0.0)) -> None:
         """Keep the recent estimated poses, so measurements use the pose at their capture time. `gyro_rad_s`:
-        the vehicle's rotation rate now (the length of the gyro's vector), which widens the measurement noise."""
+        the vehicle's rotation rate now (the length of the gyro's vector), which widens the measurement noise;
+        `velocity_ne_m_s`: the estimated velocity (north, east), where a 4.1+ filter starts."""
         self.gyro_rad_s = gyro_rad_s
-        self._history.append(_PoseSample(sample_time_s, north_m, east_m, height_m, roll_rad, pitch_rad, yaw_rad))
+        self._history.append(_PoseSample(sample_time_s, north_m, east_m, height_m, roll_rad, pitch_rad, yaw_rad,
+                                         velocity_ne_m_s[0], velocity_ne_m_s[1]))
         while self._history and self._history[0].time_s < sample_time_s - _HISTORY_S:
             self._history.popleft()
 
@@ -172,8 +196,22 @@ class PrecisionLandingEstimator:
         self._raw_rel = (rel_north, rel_east)
         # AC_PrecLand's xy measurement noise: 1 % of the height, 1 % more per rad/s of rotation, plus 2 cm.
         variance = (rel_down * (0.01 + 0.01 * self.gyro_rad_s) + 0.02) ** 2
-        if self._filters is None or not self.target_acquired(now_s):
-            self._filters = (_AxisFilter(rel_north, variance), _AxisFilter(rel_east, variance))
+        if self.firmware is Firmware.COPTER_4_6:
+            starting = not self._initialising and not self.target_acquired(now_s)
+        else:
+            starting = self._filters is None or not self.target_acquired(now_s)
+        if starting:
+            if self.firmware is Firmware.COPTER_4_6:
+                self._filters = (
+                    _AxisFilter(rel_north, variance, velocity=-pose.velocity_north_m_s,
+                                velocity_variance=INIT_VELOCITY_VARIANCE),
+                    _AxisFilter(rel_east, variance, velocity=-pose.velocity_east_m_s,
+                                velocity_variance=INIT_VELOCITY_VARIANCE))
+                self._initialising, self._init_s, self._acquired = True, now_s, False
+            else:
+                # Zero velocity with 1 (m/s)^2. AC_PrecLand 3.6/4.0 starts at minus the vehicle's velocity
+                # with 2^2: a departure that the docs name (explanation, "Departures from the sources").
+                self._filters = (_AxisFilter(rel_north, variance), _AxisFilter(rel_east, variance))
         else:
             if self.params.value("PLND_EST_TYPE") != 0:
                 nis = max(self._filters[0].nis(rel_north, variance), self._filters[1].nis(rel_east, variance))
@@ -186,11 +224,24 @@ class PrecisionLandingEstimator:
             self._filters[0].update(rel_north, variance)
             self._filters[1].update(rel_east, variance)
         self._last_update_s = now_s
+        self._acquired = not self._initialising
         self.measurements_used += 1
         return True
 
+    def update(self, now_s: float) -> None:
+        """Once a control cycle (AC_PrecLand::check_ekf_init_timeout, 4.1+): a wait whose readings stopped
+        for over INIT_MAX_GAP_S fails; one that lasted INIT_TIME_S makes the target used."""
+        if not self._initialising or self._last_update_s is None:
+            return
+        if now_s - self._last_update_s > INIT_MAX_GAP_S:
+            self._initialising = False
+            self._filters = None
+        elif now_s - self._init_s > INIT_TIME_S:
+            self._initialising, self._acquired = False, True
+
     def target_acquired(self, now_s: float) -> bool:
-        return self._last_update_s is not None and now_s - self._last_update_s <= TARGET_LOST_AFTER_S
+        return (self._acquired and self._last_update_s is not None
+                and now_s - self._last_update_s <= TARGET_LOST_AFTER_S)
 
     def _cam_pos_frd_m(self) -> tuple[float, float, float]:
         p = self.params

@@ -66,7 +66,8 @@ class Simulator:
         )
         yaw_rad = math.radians(initial_yaw_deg)
         self.dynamics = MultirotorDynamics(airframe=self.environment.airframe, state=BodyState(yaw_rad=yaw_rad))
-        self.autopilot = Autopilot(params=self.params, initial_yaw_rad=yaw_rad)
+        self.autopilot = Autopilot(params=self.params, initial_yaw_rad=yaw_rad,
+                                   firmware=self.environment.autopilot.firmware)
         self.battery_used_mah = 0.0
         self.steps = 0
         self.nav: NavEstimate = self._estimate(0.0)

@@ -7,6 +7,7 @@ a GPS-only landing misses by what the sources report (docs: explanation, "The er
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 from ..errors import require as _require
@@ -141,6 +142,26 @@ class AirframeSpec:
         _require(self.battery_cells >= 1, "battery_cells", "must be >= 1")
 
 
+class Firmware(enum.Enum):
+    """The ArduCopter release whose precision landing the embedded autopilot follows."""
+
+    # The thesis' drone (ArduCopter 3.6/4.0, whose precision landing is the same): the estimator's
+    # target-relative velocity feeds the horizontal velocity loop, and a target is used from its first reading.
+    COPTER_4_0 = "copter-4.0"
+    # ArduCopter 4.1 and later, as ArduPilot SITL 4.6.3 flies: the velocity loop stays on the EKF's velocity, a
+    # target is used after 2 s of readings without a 0.5 s gap, and the filter starts at minus the vehicle's
+    # velocity (AC_PrecLand::run_estimator, check_ekf_init_timeout; mode.cpp land_run_horizontal_control).
+    COPTER_4_6 = "copter-4.6"
+
+
+@dataclass(frozen=True)
+class AutopilotSpec:
+    """The embedded autopilot. `firmware`: whose precision landing it follows (`copter-4.0`, the thesis' and
+    the default, or `copter-4.6`). SITL and a real vehicle fly their own firmware."""
+
+    firmware: Firmware = Firmware.COPTER_4_0
+
+
 @dataclass(frozen=True)
 class EnvironmentSpec:
     """Everything about the simulated world a mission or scenario may override."""
@@ -149,6 +170,7 @@ class EnvironmentSpec:
     ground_effect: GroundEffectSpec = field(default_factory=GroundEffectSpec)
     navigation: NavigationSpec = field(default_factory=NavigationSpec)
     airframe: AirframeSpec = field(default_factory=AirframeSpec)
+    autopilot: AutopilotSpec = field(default_factory=AutopilotSpec)
     physics_rate_hz: float = 100.0
 
     def __post_init__(self) -> None:
