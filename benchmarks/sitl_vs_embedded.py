@@ -9,6 +9,14 @@ shared world: what differs from the embedded simulator is the autopilot), and `a
 physics and sensors. A precision scenario "agrees" when the means are within 30 % or 3 cm, whichever is
 larger.
 
+On preland's physics the embedded simulator is flown twice: as it is by default (ArduCopter 3.6/4.0's
+precision landing and the mission's estimate errors, fitted to the field), and as the autopilot SITL runs:
+`environment.autopilot.firmware: copter-4.6`, with the estimate errors ArduCopter's EKF made in these SITL
+trials (each SITL trial keeps its dataflash log, `preland_app/runtime/sitl_log.py`): its roll and pitch
+error (`attitude_noise_sigma_deg`), its horizontal velocity error (`velocity_noise_sigma_m_s`) and how far
+its position strays from its GPS (`position_noise_sigma_m`, scaled so that the embedded estimate's error,
+high-passed the same way, has the same rms). The first comparison is the one that agrees or not.
+
 Part 2: SITL trials per minute per core at several --speedup values (the marker scenario, the same seeds
 at every speedup), and the landing errors' change against the lowest speedup: SITL is not bit-exact
 across speedups, so this measures how far results move.
@@ -27,8 +35,10 @@ import argparse
 import os
 import statistics
 import sys
+import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,27 +49,74 @@ from fault_scenarios_table import SCENARIOS, scenario_request  # noqa: E402
 
 from preland_app.runtime.embedded import run_trial  # noqa: E402
 from preland_app.runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial  # noqa: E402
+from preland_app.runtime.sitl_log import (  # noqa: E402
+    HIGH_PASS_S, attitude_estimate_errors_deg, high_passed, horizontal_estimate_errors, rms)
+from preland_app.sim.navigation import NavigationModel  # noqa: E402
+from preland_app.sim.spec import AutopilotSpec, Firmware  # noqa: E402
 
 SWEEP_LABEL = "T3 marker"
 # The camera's frames processed per vehicle second while landing: on SITL the companion runs in wall time,
 # so at a high speedup it processes fewer frames per vehicle second than the camera's 30.
 
 
-def fly_one(job: tuple[str, str, int, str, float | None]) -> tuple:
-    """(runtime, label, seed, outcome, error cm, landing time s, wall s, speedup, message, camera Hz);
-    runtime `embedded`, `sitl` (ArduPilot's physics) or `sitl-preland` (preland's, in lock-step)."""
-    runtime, label, seed, binary, speedup = job  # speedup None: preland's default
+def fly_one(job: tuple) -> tuple:
+    """(runtime, label, seed, outcome, error cm, landing time s, wall s, speedup, message, camera Hz, EKF errors);
+    runtime `embedded`, `embedded-4.6` (with `navigation`, the estimate errors to fly with), `sitl` (ArduPilot's
+    physics) or `sitl-preland` (preland's, in lock-step, its dataflash log kept in `log_dir` for its EKF errors:
+    (attitude deg, velocity m/s, position m) lists, else None)."""
+    runtime, label, seed, binary, speedup, extra = job  # speedup None: preland's default
     started = time.perf_counter()
     request = scenario_request(label, seed)
+    ekf = None
     if runtime.startswith("sitl"):
         physics = "preland" if runtime == "sitl-preland" else "ardupilot"
-        outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup, physics=physics))
+        log_dir = Path(extra) if runtime == "sitl-preland" else None
+        name = f"{label.replace(' ', '_').replace('<', 'lt').replace('>', 'gt')}_seed{seed}.tlog"
+        outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup, physics=physics,
+                                                              log_dir=log_dir), tlog_name=name)
+        log = None if log_dir is None else log_dir / Path(name).with_suffix(".BIN").name
+        if log is not None and log.exists():
+            ekf = (attitude_estimate_errors_deg(log), *horizontal_estimate_errors(log))
+            log.unlink()
+            log.with_suffix(".tlog").unlink(missing_ok=True)
     else:
+        if runtime == "embedded-4.6":
+            request = _as_copter_4_6(request, navigation=extra)
         outcome = run_trial(request)
     frames = outcome.details.get("marker_frames")
     camera_hz = frames / outcome.landing_time_s if frames and outcome.landing_time_s else None
     return (runtime, label, seed, outcome.outcome.value, outcome.landing_error_cm, outcome.landing_time_s,
-            time.perf_counter() - started, speedup, outcome.message, camera_hz)
+            time.perf_counter() - started, speedup, outcome.message, camera_hz, ekf)
+
+
+def _as_copter_4_6(request, *, navigation: dict[str, float]):
+    environment = request.mission.environment
+    environment = replace(environment, navigation=replace(environment.navigation, **navigation),
+                          autopilot=AutopilotSpec(firmware=Firmware.COPTER_4_6))
+    return replace(request, mission=replace(request.mission, environment=environment))
+
+
+def _high_passed_rms_per_metre(*, seconds: float = 600.0) -> float:
+    """The rms of the embedded estimate's fast position error, sampled at 25 Hz like XKF1 and high-passed as
+    `high_passed` does, per metre of `position_noise_sigma_m` (the GPS drift off: it is the world's, and SITL
+    is given it)."""
+    spec = replace(scenario_request(SWEEP_LABEL, 0).mission.environment.navigation, position_noise_sigma_m=1.0,
+                   gps_drift_sigma_m=0.0)
+    model = NavigationModel(spec=spec, rangefinder_min_m=0.2, rangefinder_max_m=10.0, seed=0)
+    rows = []
+    for step in range(int(seconds * 100)):
+        estimate = model.step(dt_s=0.01, north_m=0.0, east_m=0.0, down_m=-5.0, velocity_ned_m_s=(0.0, 0.0, 0.0),
+                              tilt_cos=1.0, yaw_rad=0.0)
+        if step % 4 == 0:
+            rows.append((step * 0.01, estimate.north_m, estimate.east_m))
+    return rms(high_passed(rows))
+
+
+def ekf_navigation(results: list[tuple]) -> dict[str, float]:
+    """The navigation errors that give the embedded estimate ArduCopter's EKF errors of these SITL trials."""
+    pooled = [[value for r in results if r[10] is not None for value in r[10][part]] for part in range(3)]
+    return {"attitude_noise_sigma_deg": rms(pooled[0]), "velocity_noise_sigma_m_s": rms(pooled[1]),
+            "position_noise_sigma_m": rms(pooled[2]) / _high_passed_rms_per_metre()}
 
 
 def _mean(values: list[float]) -> float | None:
@@ -73,30 +130,42 @@ def _fmt(value: float | None, width: int, digits: int = 1) -> str:
 def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup: float | None,
             physics: list[str]) -> None:
     sitl_runtimes = ["sitl-preland" if p == "preland" else "sitl" for p in physics]
-    jobs = [(runtime, label, seed, binary, speedup if runtime == "sitl" else None) for label in labels
-            for seed in range(seeds) for runtime in (*sitl_runtimes, "embedded")]
     started = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with tempfile.TemporaryDirectory() as log_dir, ProcessPoolExecutor(max_workers=workers) as pool:
+        jobs = [(runtime, label, seed, binary, speedup if runtime == "sitl" else None, log_dir) for label in labels
+                for seed in range(seeds) for runtime in (*sitl_runtimes, "embedded")]
         results = list(pool.map(fly_one, jobs, chunksize=1))
+        if "sitl-preland" in sitl_runtimes:
+            navigation = ekf_navigation([r for r in results if r[0] == "sitl-preland"])
+            print("ArduCopter's EKF on preland's physics, pooled over its trials: roll and pitch error rms "
+                  f"{navigation['attitude_noise_sigma_deg']:.3f} deg, horizontal velocity error rms "
+                  f"{navigation['velocity_noise_sigma_m_s']:.3f} m/s, position error (high-passed over "
+                  f"{HIGH_PASS_S:g} s) as position_noise_sigma_m {navigation['position_noise_sigma_m']:.3f} m")
+            jobs = [("embedded-4.6", label, seed, binary, None, navigation) for label in labels for seed in range(seeds)]
+            results += list(pool.map(fly_one, jobs, chunksize=1))
     for runtime in sitl_runtimes:
-        _table(results, runtime=runtime, labels=labels, seeds=seeds, speedup=speedup)
+        if runtime == "sitl-preland":
+            _table(results, runtime=runtime, embedded="embedded-4.6", labels=labels, seeds=seeds, speedup=speedup)
+        _table(results, runtime=runtime, embedded="embedded", labels=labels, seeds=seeds, speedup=speedup)
     print(f"wall time {time.perf_counter() - started:.0f} s with {workers} worker(s)")
 
 
-def _table(results: list[tuple], *, runtime: str, labels: list[str], seeds: int, speedup: float | None) -> None:
+def _table(results: list[tuple], *, runtime: str, embedded: str, labels: list[str], seeds: int,
+           speedup: float | None) -> None:
     if runtime == "sitl-preland":
         at = "on preland's physics in lock-step (the shared world)"
     else:
         at = "on ArduPilot's physics, " + ("at preland's default speedup (2x with a camera, else 10x)"
                                             if speedup is None else f"at {speedup:g}x")
-    print(f"\nthesis scenarios, {seeds} seeds each, SITL {at} beside the embedded simulator "
-          "(error cm, landing time s)")
+    beside = ("the embedded simulator as ArduCopter 4.6 (copter-4.6, with the EKF errors above)"
+              if embedded == "embedded-4.6" else "the embedded simulator as it is by default (copter-4.0)")
+    print(f"\nthesis scenarios, {seeds} seeds each, SITL {at} beside {beside} (error cm, landing time s)")
     print(f"{'scenario':<22} {'SITL landed':>11} {'mean':>6} {'max':>6} {'time':>6}   {'emb landed':>10} {'mean':>6} "
           f"{'max':>6} {'time':>6}   {'mean x':>6} {'max x':>6} {'time x':>6}  agree  cam Hz SITL/emb")
     agreed = judged = 0
     for label in labels:
         row = {}
-        for name in (runtime, "embedded"):
+        for name in (runtime, embedded):
             rows = [r for r in results if r[0] == name and r[1] == label]
             errors = [r[4] for r in rows if r[3] == "landed" and r[4] is not None]
             times = [r[5] for r in rows if r[3] == "landed" and r[5] is not None]
@@ -106,7 +175,7 @@ def _table(results: list[tuple], *, runtime: str, labels: list[str], seeds: int,
             for r in rows:
                 if r[3] != "landed":
                     print(f"  {name} {label} seed {r[2]}: {r[3]} {r[8]}")
-        s, e = row[runtime], row["embedded"]
+        s, e = row[runtime], row[embedded]
 
         def ratio(a, b):
             return None if a is None or not b else a / b
@@ -128,7 +197,7 @@ def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int, label
           f"{'mean |change| cm vs first':>26} {'camera Hz':>9}")
     baseline: dict[int, float] | None = None
     for speedup in speedups:
-        jobs = [("sitl", label, seed, binary, speedup) for seed in range(seeds)]
+        jobs = [("sitl", label, seed, binary, speedup, None) for seed in range(seeds)]
         started = time.perf_counter()
         with ProcessPoolExecutor(max_workers=workers) as pool:
             results = list(pool.map(fly_one, jobs, chunksize=1))

@@ -424,6 +424,22 @@ def test_a_gyro_error_on_preland_physics_makes_arducopters_attitude_estimate_err
 
 
 @needs_real_sitl
+def test_arducopters_horizontal_estimate_errors_are_read_from_its_log(thesis_mission, tmp_path):
+    from preland_app.runtime.sitl_log import horizontal_estimate_errors, rms
+
+    outcome = run_sitl_trial(TrialRequest(mission=thesis_mission, seed=1, land_mode="irlock"),
+                             options=SitlOptions(binary=Path(REAL_SITL), physics="preland", log_dir=tmp_path),
+                             tlog_name="nav.tlog")
+    assert outcome.outcome is Outcome.LANDED, outcome.message
+    velocity_m_s, position_m = horizontal_estimate_errors(tmp_path / "nav.BIN")
+    # XKF1 of core 0 at 10 a vehicle second through some 40 s in the air; the high-pass leaves 2 s at each end.
+    assert len(velocity_m_s) > 600 and 0 < len(position_m) < len(velocity_m_s)
+    # On a true IMU and a GPS that only drifts: 2 to 3 cm/s, and about 1 cm from the GPS (the benchmark's trials).
+    assert 0.005 < rms(velocity_m_s) < 0.08
+    assert 0.002 < rms(position_m) < 0.05
+
+
+@needs_real_sitl
 def test_a_late_irlock_on_real_sitl_still_lands_on_the_beacon(thesis_mission):
     """Every IR-LOCK reading 400 ms late, in lock-step on preland's physics: ArduCopter 4.6 fuses each with
     the attitude and position of PLND_LAG (20 ms) before it arrives, yet lands on the beacon, since its

@@ -414,3 +414,17 @@ def test_the_gyro_errors_spread_and_time_constant_are_the_missions_attitude_erro
     lag = 400  # 0.5 s at 800 Hz
     correlation = sum(a * b for a, b in zip(rolls, rolls[lag:])) / (len(rolls) - lag) / spread ** 2
     assert correlation == pytest.approx(math.exp(-1.0), abs=0.1)
+
+
+def test_the_high_pass_takes_off_what_moves_slowly_and_keeps_what_moves_fast():
+    from preland_app.runtime.sitl_log import HIGH_PASS_S, high_passed, rms
+
+    rows = [(0.04 * i, 5.0 + 0.01 * 0.04 * i + 0.1 * math.sin(2 * math.pi * 0.04 * i / 0.5), -3.0)
+            for i in range(1500)]  # 60 s at 25 Hz: an offset, a slow drift, a 0.5 s wave of 0.1 m north
+    out = high_passed(rows)
+    north, east = out[0::2], out[1::2]
+    # A centred average over whole periods of the wave: the offset and the drift go, the wave stays.
+    assert rms(north) == pytest.approx(0.1 / math.sqrt(2), rel=0.02)
+    assert max(abs(v) for v in east) < 1e-9
+    # Rows within half the window of either end (less its 0.5 s slack) have no centred average.
+    assert len(north) == sum(1 for t, *_ in rows if HIGH_PASS_S / 2 - 0.5 <= t <= 60 - 0.04 - HIGH_PASS_S / 2 + 0.5)
