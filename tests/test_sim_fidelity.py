@@ -371,3 +371,11 @@ def test_late_readings_carry_copter_4_0_off_the_beacon_and_not_copter_4_6(thesis
                             for seed in range(3)]
     assert max(errors[Firmware.COPTER_4_6]) < 5.0, errors
     assert max(errors[Firmware.COPTER_4_0]) > 15.0, errors
+
+
+def test_copter_4_6_uses_a_raw_estimate_from_its_first_reading():
+    # AC_PrecLand's RAW_SENSOR estimator (PLND_EST_TYPE=0) has no initialisation wait, in 4.6 as in 4.0.
+    from preland_app.sim.spec import Firmware
+
+    estimator = PrecisionLandingEstimator(ParameterTable({"PLND_EST_TYPE": 0}), firmware=Firmware.COPTER_4_6)
+    assert _readings(estimator, [round(0.1 * i, 6) for i in range(60)], until_s=5.0) == 0.0

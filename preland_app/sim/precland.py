@@ -22,9 +22,9 @@ last one.
 
 `firmware` chooses between ArduCopter releases (`sim.spec.Firmware`). As 3.6/4.0, the thesis' (the default):
 the filter starts at zero relative velocity and the target is used from its first reading. As 4.1 and later
-(4.6): the filter starts at minus the vehicle's velocity PLND_LAG ago with a variance of 2^2 (m/s)^2, fuses
-readings from the first, and the target is used only once 2 s of readings have come without a gap over
-0.5 s (a longer gap restarts that wait at the next reading).
+(4.6), with PLND_EST_TYPE=1: the filter starts at minus the vehicle's velocity PLND_LAG ago with a variance
+of 2^2 (m/s)^2, fuses readings from the first, and the target is used only once 2 s of readings have come
+without a gap over 0.5 s (a longer gap restarts that wait at the next reading).
 """
 
 from __future__ import annotations
@@ -196,12 +196,14 @@ class PrecisionLandingEstimator:
         self._raw_rel = (rel_north, rel_east)
         # AC_PrecLand's xy measurement noise: 1 % of the height, 1 % more per rad/s of rotation, plus 2 cm.
         variance = (rel_down * (0.01 + 0.01 * self.gyro_rad_s) + 0.02) ** 2
-        if self.firmware is Firmware.COPTER_4_6:
+        # 4.1+ waits only with its filter (PLND_EST_TYPE=1); its raw estimator uses each reading at once.
+        waits = self.firmware is Firmware.COPTER_4_6 and self.params.value("PLND_EST_TYPE") != 0
+        if waits:
             starting = not self._initialising and not self.target_acquired(now_s)
         else:
             starting = self._filters is None or not self.target_acquired(now_s)
         if starting:
-            if self.firmware is Firmware.COPTER_4_6:
+            if waits:
                 self._filters = (
                     _AxisFilter(rel_north, variance, velocity=-pose.velocity_north_m_s,
                                 velocity_variance=INIT_VELOCITY_VARIANCE),
