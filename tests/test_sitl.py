@@ -219,18 +219,19 @@ def test_copter_defaults_are_found_in_the_binarys_ardupilot_tree(tmp_path):
 
 
 def test_sitl_gets_a_rangefinder_and_a_per_trial_gps_error(fake_sitl, thesis_mission, tmp_path):
-    from preland_app.runtime.sitl import GpsErrorDriver, rangefinder_params
+    from preland_app.runtime.sitl import GPS_UPDATE_PERIOD_S, GpsErrorDriver, rangefinder_params
 
     params = rangefinder_params(thesis_mission)
     assert params["RNGFND1_TYPE"] == 100 and params["RNGFND1_ORIENT"] == 25
-    spec = thesis_mission.environment.navigation
-    first = GpsErrorDriver(spec=spec, seed=1, latitude_deg=-35.36).params()
-    again = GpsErrorDriver(spec=spec, seed=1, latitude_deg=-35.36).params()
-    other = GpsErrorDriver(spec=spec, seed=2, latitude_deg=-35.36).params()
+    environment = thesis_mission.environment
+    spec = environment.navigation
+    first = GpsErrorDriver(environment=environment, seed=1, latitude_deg=-35.36).params()
+    again = GpsErrorDriver(environment=environment, seed=1, latitude_deg=-35.36).params()
+    other = GpsErrorDriver(environment=environment, seed=2, latitude_deg=-35.36).params()
     assert first == again and first != other
     # The drift's spread over many seeds is the embedded model's (degrees back to metres).
-    norths = [GpsErrorDriver(spec=spec, seed=s, latitude_deg=0.0).params()["SIM_GPS_GLITCH_X"] * 111_319.49
-              for s in range(400)]
+    norths = [GpsErrorDriver(environment=environment, seed=s, latitude_deg=0.0).params()["SIM_GPS_GLITCH_X"]
+              * 111_319.49 for s in range(400)]
     import statistics
 
     assert abs(statistics.pstdev(norths) - spec.gps_drift_sigma_m) < 0.15 * spec.gps_drift_sigma_m
@@ -244,6 +245,35 @@ def test_sitl_gets_a_rangefinder_and_a_per_trial_gps_error(fake_sitl, thesis_mis
     # SITL's own wind blows from the embedded simulator's direction for the seed, and the trial says so.
     assert outcome.details["wind_from_deg"] == run_trial(TrialRequest(mission=thesis_mission, seed=4)
                                                          ).details["wind_from_deg"]
+    # The GPS error started moving at the first update after arming, and SITL landed with the drift the
+    # embedded estimate has that long after its own arming.
+    armed_s = outcome.details["sitl_gps_armed_s"]
+    assert armed_s is not None and armed_s % GPS_UPDATE_PERIOD_S == pytest.approx(0.0, abs=1e-6)
+    at_arming_cm = [round(v * 100.0, 1) for v in GpsErrorDriver(environment=environment, seed=4,
+                                                                 latitude_deg=0.0).error_ned_m]
+    assert outcome.details["sitl_gps_error_cm"] != at_arming_cm
+
+
+def test_sitl_gets_the_gps_drift_path_of_the_embedded_estimate_for_the_seed_aligned_at_arming(thesis_mission):
+    from preland_app.runtime.sitl import GpsErrorDriver
+    from preland_app.sim.simulator import Simulator
+
+    environment = thesis_mission.environment
+    for seed in (3, 8):
+        simulator = Simulator(seed=seed, environment=environment)
+        driver = GpsErrorDriver(environment=environment, seed=seed, latitude_deg=0.0)
+        # Until SITL arms: the drift of the embedded simulator's arming time, when its fix arrives.
+        for _ in range(round(environment.navigation.gps_fix_delay_s * environment.physics_rate_hz)):
+            simulator.step()
+        assert driver.error_ned_m == simulator.navigation.gps_drift_ne_m
+        # 25 s after arming, on both.
+        for _ in range(round(25.0 * environment.physics_rate_hz)):
+            simulator.step()
+        driver.at(25.0)
+        assert driver.error_ned_m == simulator.navigation.gps_drift_ne_m
+        moved = math.dist(driver.error_ned_m, GpsErrorDriver(environment=environment, seed=seed,
+                                                             latitude_deg=0.0).error_ned_m)
+        assert moved > 0.01  # the path moved on: the comparison is not between two start values
 
 
 @pytest.mark.parametrize("usage, flag", [("--serial0 device  set device string for SERIAL0", "--serial0"),

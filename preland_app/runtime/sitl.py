@@ -53,15 +53,15 @@ from pathlib import Path
 from ..config.mission import MissionSpec
 from ..errors import PrelandError
 from ..outcome import TrialOutcome
-from ..sim.navigation import gps_drift
-from ..sim.noise import GaussianStream, child_rng
+from ..sim.navigation import GpsPositionError
+from ..sim.noise import child_rng
 from ..sim.air import AirAtVehicle
 from ..sim.imu import GyroError
 from ..sim.json_bridge import JsonBridge, JsonBridgeTimeout
 from ..sim.multirotor import QuadXFrame, QuadXMultirotor
-from ..sim.spec import DEFAULT_HOME, NavigationSpec
+from ..sim.spec import DEFAULT_HOME, EnvironmentSpec
 from ..sensing.virtual_camera import CameraPose
-from ..vehicle.lockstep_clock import MISSION_START_S, LockstepClock, udp_receive_queue
+from ..vehicle.lockstep_clock import LockstepClock, udp_receive_queue
 from ..vehicle.mavlink_backend import MavlinkVehicle
 from .base import RuntimeOptionError, TrialRequest, build_options
 from .mavlink import fly_mavlink
@@ -96,7 +96,7 @@ SPEEDUP_NO_CAMERA = 10.0
 # On preland's physics in lock-step, a ceiling SITL never reaches (it would sleep above it): the rate is
 # what SITL, the physics and the companion together manage (benchmarks/sitl_lockstep.py).
 SPEEDUP_LOCKSTEP = 1000.0
-GPS_UPDATE_PERIOD_S = 2.0  # vehicle seconds between SIM_GPS_GLITCH updates (the error wanders over ~10 s)
+GPS_UPDATE_PERIOD_S = 0.5  # vehicle seconds between SIM_GPS_GLITCH updates (the drift moves ~1 cm in that time)
 METRES_PER_DEG_LAT = 111_319.49  # WGS-84 equatorial, as ArduPilot's LATLON_TO_M
 
 
@@ -288,46 +288,68 @@ def rangefinder_params(mission: MissionSpec) -> dict[str, float]:
 
 
 class GpsErrorDriver:
-    """The trial's GPS position error on SITL: the embedded simulator's drift model (a smoothed Gauss-Markov
-    process per axis, `gps_drift_sigma_m`, `gps_drift_tau_s`, `gps_drift_smooth_s`, from the trial seed's own
-    stream) written into SITL's GPS glitch offsets, SIM_GPS_GLITCH_X/Y (degrees of latitude/longitude,
-    added to every GPS fix), every GPS_UPDATE_PERIOD_S vehicle seconds."""
+    """The trial's GPS position error on SITL: the drift path the embedded simulator's estimate has for the same
+    seed (`GpsPositionError` from the seed's `gps` stream, stepped at the mission's `physics_rate_hz` as the
+    embedded simulator steps it), written into SITL's GPS glitch offsets, SIM_GPS_GLITCH_X/Y (degrees of
+    latitude/longitude, added to every GPS fix). Only the drift is written: SITL's EKF has its own fast noise.
 
-    def __init__(self, *, spec: NavigationSpec, seed: int, latitude_deg: float) -> None:
-        self._north, self._east = gps_drift(spec, GaussianStream(child_rng(seed, "sitl_gps")))
+    The two paths are aligned at arming, since each runtime arms at its own time (the embedded simulator when
+    its fix arrives, `gps_fix_delay_s`; SITL when its EKF is ready, some seconds later): until SITL arms it gets
+    the drift of the embedded arming time, then the drift moves on with SITL's vehicle time, written every
+    GPS_UPDATE_PERIOD_S vehicle seconds."""
+
+    def __init__(self, *, environment: EnvironmentSpec, seed: int, latitude_deg: float) -> None:
+        spec = environment.navigation
+        self._error = GpsPositionError.for_seed(spec, seed)
+        self._error.step(0.0)  # the embedded simulator's first estimate, before its first step
+        self._dt_s = 1.0 / environment.physics_rate_hz
+        self._steps = 0
+        self._armed_path_s = spec.gps_fix_delay_s
+        self.path_s = 0.0  # the embedded simulator's time the drift has reached (s)
+        self._advance_to(self._armed_path_s)
         self._metres_per_deg_lon = METRES_PER_DEG_LAT * max(math.cos(math.radians(latitude_deg)), 1e-6)
-        self.updates = 0  # periods the error has moved on
+        self.updates = 0  # writes after arming
+        self.armed_at_s: float | None = None  # SITL's vehicle time the drift started moving from (s)
 
     @property
     def error_ned_m(self) -> tuple[float, float]:
-        return self._north.value, self._east.value
+        return self._error.drift_ne_m
 
     def params(self) -> dict[str, float]:
         """The current error as SITL parameters."""
-        return {"SIM_GPS_GLITCH_X": self._north.value / METRES_PER_DEG_LAT,
-                "SIM_GPS_GLITCH_Y": self._east.value / self._metres_per_deg_lon}
+        north_m, east_m = self._error.drift_ne_m
+        return {"SIM_GPS_GLITCH_X": north_m / METRES_PER_DEG_LAT, "SIM_GPS_GLITCH_Y": east_m / self._metres_per_deg_lon}
 
-    def step(self, dt_s: float) -> dict[str, float]:
-        self._north.step(dt_s)
-        self._east.step(dt_s)
+    def _advance_to(self, path_s: float) -> None:
+        target = round(path_s / self._dt_s)
+        while self._steps < target:
+            self._error.step(self._dt_s)
+            self._steps += 1
+        self.path_s = self._steps * self._dt_s
+
+    def at(self, since_armed_s: float) -> dict[str, float]:
+        """The error `since_armed_s` vehicle seconds after arming, as SITL parameters (moves only forwards)."""
+        self._advance_to(self._armed_path_s + since_armed_s)
         return self.params()
 
-    async def run(self, vehicle: MavlinkVehicle, *, first_update_s: float = 0.0) -> None:
-        """Move the error along in vehicle time for as long as the trial flies: at every multiple of
-        GPS_UPDATE_PERIOD_S from `first_update_s` on, the error of that many periods is written, so the
-        error SITL has at a vehicle time does not depend on when the companion connected."""
+    async def run(self, vehicle: MavlinkVehicle) -> None:
+        """Follow the trial in vehicle time: at every multiple of GPS_UPDATE_PERIOD_S, look whether the vehicle
+        has armed; from the first tick that finds it armed on, write the error of the time since that tick. The
+        ticks are in vehicle time, so in lock-step the error at a vehicle time does not depend on the machine."""
         while not vehicle.connected:
             await asyncio.sleep(0.05)
         clock = vehicle.clock
         period_s = GPS_UPDATE_PERIOD_S
         while True:
             now_s = clock.now_s()
-            tick = max(math.floor(now_s / period_s + 1e-9) + 1, math.ceil(first_update_s / period_s - 1e-9))
-            await clock.sleep(tick * period_s - now_s)
-            while self.updates < tick:
-                self.step(period_s)
-                self.updates += 1
-            for name, value in self.params().items():
+            tick_s = (math.floor(now_s / period_s + 1e-9) + 1) * period_s
+            await clock.sleep(tick_s - now_s)
+            if self.armed_at_s is None:
+                if not (await vehicle.telemetry()).armed:
+                    continue
+                self.armed_at_s = tick_s
+            self.updates += 1
+            for name, value in self.at(tick_s - self.armed_at_s).items():
                 await vehicle.set_param(name, value)
 
 
@@ -571,8 +593,7 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     the physics' own state). SITL ending during the trial ends it with outcome `error` naming how SITL ended."""
     mission = request.resolved_mission()
     options = replace(options, speedup=options.speedup_for(uses_camera=mission.land.strategy().uses_marker))
-    gps = GpsErrorDriver(spec=mission.environment.navigation, seed=request.seed,
-                         latitude_deg=DEFAULT_HOME.latitude_deg)
+    gps = GpsErrorDriver(environment=mission.environment, seed=request.seed, latitude_deg=DEFAULT_HOME.latitude_deg)
     on_preland_physics = options.physics == "preland"
     wind = {} if on_preland_physics else sim_params(mission, request.seed)
     params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **rangefinder_params(mission), **wind,
@@ -590,14 +611,11 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
             sitl.log_path = Path(options.log_dir) / Path(name).with_suffix(".BIN").name
         lockstep = LockstepClock(gate=sitl.bridge.gate, unread=functools.partial(udp_receive_queue, sitl.port),
                                  relay=sitl.relay) if sitl.bridge is not None else None
-        # In lock-step the GPS error moves on from the mission's start, which is at the same vehicle time
-        # in every trial, so SITL's GPS is the same whenever the companion connected.
-        start_s = MISSION_START_S if lockstep is not None else 0.0
         # On preland's physics the bridge's state is the truth: no SIM_STATE asked for (the 2020 ArduCopter
         # sends none, only SIMSTATE, which has no altitude).
         outcome = await fly_mavlink(request, url=sitl.url, truth=not on_preland_physics, tlog_path=tlog_path,
                                     fault_listen=options.fault_listen,
-                                    companions=(sitl.watch, functools.partial(gps.run, first_update_s=start_s)),
+                                    companions=(sitl.watch, gps.run),
                                     lockstep=lockstep,
                                     sensor_truth=BridgeTruth(sitl.bridge) if sitl.bridge is not None else None)
     outcome.details["runtime"] = "sitl"
@@ -617,6 +635,7 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
         outcome.details["bridge_waiting_wall_s"] = round(counters.waiting_wall_s, 2)
         outcome.details["bridge_vehicle_s"] = round(sitl.bridge.latest_state.time_s, 2)  # from SITL's boot
     outcome.details["sitl_gps_error_cm"] = [round(v * 100.0, 1) for v in gps.error_ned_m]
+    outcome.details["sitl_gps_armed_s"] = gps.armed_at_s
     return outcome
 
 

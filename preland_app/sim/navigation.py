@@ -46,13 +46,40 @@ class NavEstimate:
 def gps_drift(spec: NavigationSpec, noise: GaussianStream) -> tuple[SmoothGaussMarkov, SmoothGaussMarkov]:
     """The GPS position error's slow drift, north and east (m): per axis a Gauss-Markov process of stationary
     std `gps_drift_sigma_m` and time constant `gps_drift_tau_s`, low-pass filtered over `gps_drift_smooth_s`,
-    drawing from `noise` (north first). The embedded autopilot's estimate and SITL's glitch offsets share it."""
+    drawing from `noise` (north first)."""
     def axis() -> SmoothGaussMarkov:
         return SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
                                  smooth_s=spec.gps_drift_smooth_s, noise=noise)
 
     north = axis()
     return north, axis()
+
+
+class GpsPositionError:
+    """The GPS position error, north and east (m): the slow drift (`gps_drift`) plus a fast noise
+    (`position_noise_sigma_m`, 1 s correlation), all drawing from the trial seed's `gps` stream in one fixed
+    order. The embedded autopilot's estimate and SITL's glitch offsets step the same one, so a seed gives the
+    same drift path on both."""
+
+    def __init__(self, *, spec: NavigationSpec, noise: GaussianStream) -> None:
+        self._drift_north, self._drift_east = gps_drift(spec, noise)
+        self._fast_north = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
+        self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
+
+    @classmethod
+    def for_seed(cls, spec: NavigationSpec, seed: int) -> "GpsPositionError":
+        return cls(spec=spec, noise=GaussianStream(child_rng(seed, "gps")))
+
+    def step(self, dt_s: float) -> tuple[float, float]:
+        """Advance by `dt_s` seconds; the whole error (drift plus fast noise), north and east in m."""
+        north = self._drift_north.step(dt_s) + self._fast_north.step(dt_s)
+        east = self._drift_east.step(dt_s) + self._fast_east.step(dt_s)
+        return north, east
+
+    @property
+    def drift_ne_m(self) -> tuple[float, float]:
+        """The drift alone, north and east (m)."""
+        return self._drift_north.value, self._drift_east.value
 
 
 class NavigationModel:
@@ -68,9 +95,7 @@ class NavigationModel:
         self._imu_noise = streams["imu"]
         self._rangefinder_noise = streams["rangefinder"]
         self._velocity_noise = streams["velocity"]
-        self._drift_north, self._drift_east = gps_drift(spec, gps)
-        self._fast_north = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=gps)
-        self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=gps)
+        self._gps_error = GpsPositionError(spec=spec, noise=gps)
         self._baro_drift = GaussMarkov(sigma=spec.baro_drift_sigma_m, tau_s=spec.baro_drift_tau_s, noise=baro)
         self._baro_noise = GaussMarkov(sigma=spec.baro_noise_sigma_m, tau_s=_BARO_NOISE_TAU_S, noise=baro)
         attitude_sigma = math.radians(spec.attitude_noise_sigma_deg)
@@ -83,6 +108,11 @@ class NavigationModel:
         self._previous_velocity: tuple[float, float] | None = None
         self.elapsed_s = 0.0
 
+    @property
+    def gps_drift_ne_m(self) -> tuple[float, float]:
+        """The GPS error's slow drift now, north and east (m)."""
+        return self._gps_error.drift_ne_m
+
     def step(self, *, dt_s: float, north_m: float, east_m: float, down_m: float,
              velocity_ned_m_s: tuple[float, float, float], tilt_cos: float, yaw_rad: float) -> NavEstimate:
         """Advance error processes by `dt_s` and return the estimate of the given true state.
@@ -91,8 +121,7 @@ class NavigationModel:
         """
         self.elapsed_s += dt_s
         spec = self.spec
-        error_north = self._drift_north.step(dt_s) + self._fast_north.step(dt_s)
-        error_east = self._drift_east.step(dt_s) + self._fast_east.step(dt_s)
+        error_north, error_east = self._gps_error.step(dt_s)
         error_down = -(self._baro_drift.step(dt_s) + self._baro_noise.step(dt_s) - self._baro_origin_m)
         velocity_sigma = spec.velocity_noise_sigma_m_s
         imu = self._imu_noise
