@@ -361,6 +361,34 @@ def test_the_bridge_flies_in_the_trial_seeds_air_and_tells_sitl_of_it():
         assert max(abs(w[0] - winds[0][0]) for w in winds) > 0.05  # the gusts blow
 
 
+def test_the_air_starts_when_the_motors_turn_after_the_embedded_simulators_time_on_the_ground():
+    from preland_app.sim.air import AirAtVehicle
+    from preland_app.sim.spec import EnvironmentSpec, WindSpec
+
+    gusty = EnvironmentSpec(wind=WindSpec(speed_m_s=1.5, direction_from_deg=None, turbulence_w20_m_s=2.0))
+    lead_s = 3.0
+    bridge = JsonBridge(model=QuadXMultirotor(), port=0, packet_timeout_s=10.0,
+                        air=AirAtVehicle(environment=gusty, seed=5, lead_on_ground_s=lead_s)).start()
+    sitl = StandInSitl(bridge.address)
+    try:
+        # SITL booting and arming: motors at MOT_PWM_MIN, the vehicle on the ground in still air.
+        idle = [sitl.exchange(frame, [1000] * 16) for frame in range(RATE_HZ)]
+        turning = [sitl.exchange(frame, [1100] * 4 + [1000] * 12) for frame in range(RATE_HZ, RATE_HZ + 20)]
+    finally:
+        sitl.close()
+        bridge.stop()
+    assert all("velocity_wind" not in reply or reply["velocity_wind"] == [0.0, 0.0, 0.0] for reply in idle)
+    # From the first step the motors turn: the air the embedded simulator has lead_s after its start, stepped
+    # alike (at rest on the ground until then, at rest on the ground in these 20 steps too).
+    embedded = AirAtVehicle(environment=gusty, seed=5)
+    for _ in range(round(lead_s * RATE_HZ)):
+        embedded.step(dt_s=DT_S, height_m=0.0, velocity_ned_m_s=(0.0, 0.0, 0.0))
+    expected = [embedded.step(dt_s=DT_S, height_m=0.0, velocity_ned_m_s=(0.0, 0.0, 0.0)) for _ in range(20)]
+    told = [value for reply in turning for value in reply["velocity_wind"]]
+    assert told == pytest.approx([value for wind in expected for value in wind], abs=1e-9)
+    assert math.hypot(*expected[0][:2]) > 0.5
+
+
 def test_a_gyro_error_reaches_sitls_roll_and_pitch_rates_only_and_repeats_with_its_seed():
     from preland_app.sim.imu import GyroError
     from preland_app.sim.spec import NavigationSpec

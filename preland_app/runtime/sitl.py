@@ -287,6 +287,13 @@ def rangefinder_params(mission: MissionSpec) -> dict[str, float]:
     return {"RNGFND1_TYPE": RNGFND_TYPE_SIM, "RNGFND1_ORIENT": RNGFND_ORIENT_DOWN, **ranged}
 
 
+def embedded_arming_s(environment: EnvironmentSpec) -> float:
+    """When the embedded simulator arms, in its seconds from the start: when its position fix arrives (its
+    mission arms at the next poll, 0.1 s later). SITL's world is aligned to it: the GPS drift at SITL's arming,
+    the air when SITL's motors first turn."""
+    return environment.navigation.gps_fix_delay_s
+
+
 class GpsErrorDriver:
     """The trial's GPS position error on SITL: the drift path the embedded simulator's estimate has for the same
     seed (`GpsPositionError` from the seed's `gps` stream, stepped at the mission's `physics_rate_hz` as the
@@ -304,7 +311,7 @@ class GpsErrorDriver:
         self._error.step(0.0)  # the embedded simulator's first estimate, before its first step
         self._dt_s = 1.0 / environment.physics_rate_hz
         self._steps = 0
-        self._armed_path_s = spec.gps_fix_delay_s
+        self._armed_path_s = embedded_arming_s(environment)
         self.path_s = 0.0  # the embedded simulator's time the drift has reached (s)
         self._advance_to(self._armed_path_s)
         self._metres_per_deg_lon = METRES_PER_DEG_LAT * max(math.cos(math.radians(latitude_deg)), 1e-6)
@@ -598,7 +605,8 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     wind = {} if on_preland_physics else sim_params(mission, request.seed)
     params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **rangefinder_params(mission), **wind,
               **gps.params(), **mission.params, **options.extra_params}
-    air = AirAtVehicle(environment=mission.environment, seed=request.seed) if on_preland_physics else None
+    air = AirAtVehicle(environment=mission.environment, seed=request.seed,
+                       lead_on_ground_s=embedded_arming_s(mission.environment)) if on_preland_physics else None
     gyro_error = GyroError.for_mission(mission.environment.navigation, seed=request.seed,
                                        per_attitude_error=options.gyro_error) if on_preland_physics else None
     async with SitlInstance(options=options, params=params, heading_deg=mission.initial_yaw_deg,

@@ -91,6 +91,8 @@ class JsonBridge:
             raise ValueError("packet_timeout_s must be positive")
         self.model = model
         self.air = air  # None: still air
+        self._motors_turned = False
+        self._motor_idle_pwm_us = model.frame.pwm_min_us + 10.0  # disarmed and spooled down: MOT_PWM_MIN
         self.gyro_error = gyro_error  # None: SITL is told the true body rates
         self.packet_timeout_s = float(packet_timeout_s)
         self._send_rangefinder = send_rangefinder
@@ -242,7 +244,10 @@ class JsonBridge:
         stepping_at = time.perf_counter()
         dt_s = 1.0 / frame_rate_hz
         with self._lock:
-            wind = None if self.air is None else self.air.step(
+            # The air moves from the first step the motors turn on (before, the vehicle rests on the ground,
+            # still air): that is where the embedded simulator's flight starts, whenever SITL got ready.
+            self._motors_turned = self._motors_turned or max(pwm_us[:4]) > self._motor_idle_pwm_us
+            wind = None if self.air is None or not self._motors_turned else self.air.step(
                 dt_s=dt_s, height_m=self.model.height_above_ground_m, velocity_ned_m_s=self.model.velocity_ned_m_s)
             state = self.model.step(pwm_us, dt_s, wind or (0.0, 0.0, 0.0))
             self._steps += 1
