@@ -11,7 +11,8 @@ larger.
 
 On preland's physics the embedded simulator is flown twice: as it is by default (ArduCopter 3.6/4.0's
 precision landing and the mission's estimate errors, fitted to the field), and as the autopilot SITL runs:
-`environment.autopilot.firmware: copter-4.6`, with the estimate errors ArduCopter's EKF made in these SITL
+`environment.autopilot.firmware: copter-4.6` at SITL's physics step (400 Hz, so that a seed's gusts take the
+same path), with the estimate errors ArduCopter's EKF made in these SITL
 trials (each SITL trial keeps its dataflash log, `preland_app/runtime/sitl_log.py`): its roll and pitch
 error (`attitude_noise_sigma_deg`), its horizontal velocity error (`velocity_noise_sigma_m_s`) and how far
 its position strays from its GPS (`position_noise_sigma_m`, scaled so that the embedded estimate's error,
@@ -89,10 +90,15 @@ def fly_one(job: tuple) -> tuple:
             time.perf_counter() - started, speedup, outcome.message, camera_hz, ekf)
 
 
+# The step of SITL's JSON physics (SIM_RATE_HZ in the packaged sitl_json_quadx.parm): at the same step a seed's
+# gusts take the same path on both from the start of the flight (sim/air.py).
+SITL_PHYSICS_RATE_HZ = 400.0
+
+
 def _as_copter_4_6(request, *, navigation: dict[str, float]):
     environment = request.mission.environment
     environment = replace(environment, navigation=replace(environment.navigation, **navigation),
-                          autopilot=AutopilotSpec(firmware=Firmware.COPTER_4_6))
+                          autopilot=AutopilotSpec(firmware=Firmware.COPTER_4_6), physics_rate_hz=SITL_PHYSICS_RATE_HZ)
     return replace(request, mission=replace(request.mission, environment=environment))
 
 

@@ -238,3 +238,43 @@ def test_auto_disarm_when_left_landed():
         return before, (await vehicle.telemetry()).armed
 
     assert fly(scenario) == (True, False)  # DISARM_DELAY = 10 s
+
+
+@pytest.mark.parametrize("firmware", ["copter-4.0", "copter-4.6"])
+def test_land_from_a_guided_position_holds_its_target_on_4_6_and_the_stopping_point_on_4_0(firmware):
+    """ArduCopter 3.6/4.0's LAND holds the stopping point (loiter_nav->get_stopping_point_xy: v / PSC_POSXY_P ahead
+    at low speed); 4.6's leaves the running position controller as it is, on GUIDED's target."""
+    from dataclasses import replace
+
+    from preland_app.sim.control import stopping_distance_m
+    from preland_app.sim.spec import AutopilotSpec, Firmware
+
+    environment = replace(CALM, autopilot=AutopilotSpec(firmware=Firmware(firmware)))
+
+    async def scenario(vehicle, simulator, clock):
+        await airborne(vehicle, clock)
+        start = (await vehicle.telemetry()).position_ned_m
+        target = (start.north_m + 6.0, start.east_m)
+        await vehicle.goto_ned(position_ned_m=PositionNed(target[0], target[1], -10.0))
+
+        async def on_the_way():
+            return (await vehicle.telemetry()).position_ned_m.north_m - start.north_m > 1.5
+
+        await wait_until(on_the_way, clock=clock, timeout_s=30, operation="leave")
+        t = await vehicle.telemetry()
+        speed_m_s = t.velocity_ned_m_s.north_m_s
+        stopping_point = (t.position_ned_m.north_m + stopping_distance_m(
+            speed_m_s, simulator.params.value("PSC_POSXY_P"), simulator.params.m_s("WPNAV_ACCEL")), t.position_ned_m.east_m)
+        await vehicle.set_mode(FlightMode.LAND)
+
+        async def disarmed():
+            return not (await vehicle.telemetry()).armed
+
+        await wait_until(disarmed, clock=clock, timeout_s=60, operation="land")
+        end = (await vehicle.telemetry()).position_ned_m
+        return target, stopping_point, (end.north_m, end.east_m)
+
+    target, stopping_point, landed = fly(scenario, environment=environment)
+    assert math.dist(target, stopping_point) > 1.0  # the two rules part
+    expected = target if firmware == "copter-4.6" else stopping_point
+    assert math.dist(landed, expected) < 0.2, (landed, target, stopping_point)

@@ -7,7 +7,8 @@ their behaviour follow ArduCopter 4.x:
   targets that time out after GUID_TIMEOUT, hold;
 * LOITER, POSHOLD: hold the stopping point (no pilot sticks here, so POSHOLD's braking and
   stick mixing reduce to LOITER's hold);
-* LAND: hold the stopping point horizontally; descend as mode_land.cpp does
+* LAND: hold the stopping point horizontally (4.6: the held target of a running position controller, else
+  where the vehicle is); descend as mode_land.cpp does
   (sqrt-shaped approach to LAND_ALT_LOW at up to LAND_SPEED_HIGH or
   WPNAV_SPEED_DN, then LAND_SPEED); disarm on land detection;
 * RTL: climb to RTL_ALT, return home, loiter RTL_LOIT_TIME, land (or, with
@@ -190,14 +191,25 @@ class Autopilot:
         if mode is FlightMode.RTL and not self.home_set:
             raise CommandDenied(operation="set_mode", reason="RTL requires home")
         previous = self.mode
+        # ArduCopter 4.6's LAND (mode_land.cpp) leaves a running xy position controller as it is: from GUIDED
+        # at a position, LOITER or POSHOLD it holds the target it had. 3.6/4.0's LAND holds the stopping point.
+        keeps_xy_target = (self.firmware is Firmware.COPTER_4_6 and mode is FlightMode.LAND
+                           and self._holds_xy_target())
         self.mode = mode
-        self._xy.reset(velocity_north_m_s=nav.velocity_north_m_s, velocity_east_m_s=nav.velocity_east_m_s)
+        if not keeps_xy_target:
+            self._xy.reset(velocity_north_m_s=nav.velocity_north_m_s, velocity_east_m_s=nav.velocity_east_m_s)
         self._z.reset(-nav.velocity_down_m_s)
         if mode is FlightMode.GUIDED:
             self._guided = GuidedTarget.NONE
             self._hold_here()
         elif mode in (FlightMode.LOITER, FlightMode.POSHOLD, FlightMode.LAND):
-            self._hold_here()
+            if keeps_xy_target:
+                self._target_down_m = nav.down_m
+            elif mode is FlightMode.LAND and self.firmware is Firmware.COPTER_4_6:
+                # init_xy_controller: the target starts where the vehicle is, its velocity shaped to zero
+                self._target_north_m, self._target_east_m, self._target_down_m = nav.north_m, nav.east_m, nav.down_m
+            else:
+                self._hold_here()
             self._precland_active = False
             self.retry.reset()
             self._retry_hold = None
@@ -208,6 +220,13 @@ class Autopilot:
                                   self.altitude_above_home_m())
         if previous is not mode:
             self._say(f"Mode {mode.name}")
+
+    def _holds_xy_target(self) -> bool:
+        """Whether the xy position controller is running on a held target: GUIDED at a position (or taking
+        off), LOITER, POSHOLD."""
+        if self.mode is FlightMode.GUIDED:
+            return self._guided in (GuidedTarget.POSITION, GuidedTarget.TAKEOFF)
+        return self.mode in (FlightMode.LOITER, FlightMode.POSHOLD)
 
     def _require_guided(self, operation: str) -> NavEstimate:
         nav = self._nav(operation)

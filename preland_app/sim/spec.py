@@ -156,8 +156,8 @@ class Firmware(enum.Enum):
 
 @dataclass(frozen=True)
 class AutopilotSpec:
-    """The embedded autopilot. `firmware`: whose precision landing it follows (`copter-4.0`, the thesis' and
-    the default, or `copter-4.6`). SITL and a real vehicle fly their own firmware."""
+    """The embedded autopilot. `firmware`: whose precision landing and LAND entry it follows (`copter-4.0`, the
+    thesis' and the default, or `copter-4.6`). SITL and a real vehicle fly their own firmware."""
 
     firmware: Firmware = Firmware.COPTER_4_0
 
