@@ -263,8 +263,9 @@ def test_land_from_a_guided_position_holds_its_target_on_4_6_and_the_stopping_po
         await wait_until(on_the_way, clock=clock, timeout_s=30, operation="leave")
         t = await vehicle.telemetry()
         speed_m_s = t.velocity_ned_m_s.north_m_s
-        stopping_point = (t.position_ned_m.north_m + stopping_distance_m(
-            speed_m_s, simulator.params.value("PSC_POSXY_P"), simulator.params.m_s("WPNAV_ACCEL")), t.position_ned_m.east_m)
+        ahead_m = stopping_distance_m(speed_m_s, simulator.params.value("PSC_POSXY_P"),
+                                      simulator.params.m_s("WPNAV_ACCEL"))
+        stopping_point = (t.position_ned_m.north_m + ahead_m, t.position_ned_m.east_m)
         await vehicle.set_mode(FlightMode.LAND)
 
         async def disarmed():
