@@ -241,9 +241,11 @@ def test_auto_disarm_when_left_landed():
 
 
 @pytest.mark.parametrize("firmware", ["copter-4.0", "copter-4.6"])
-def test_land_from_a_guided_position_holds_its_target_on_4_6_and_the_stopping_point_on_4_0(firmware):
+def test_land_from_a_guided_position_holds_guideds_target_on_4_6_and_the_stopping_point_on_4_0(firmware):
     """ArduCopter 3.6/4.0's LAND holds the stopping point (loiter_nav->get_stopping_point_xy: v / PSC_POSXY_P ahead
-    at low speed); 4.6's leaves the running position controller as it is, on GUIDED's target."""
+    at low speed). 4.6's leaves the running position controller as it is; the embedded `copter-4.6` holds
+    GUIDED's target (ArduCopter's kinematic target, which stops along its path and is GUIDED's target once
+    arrived: a departure for a LAND commanded mid-leg, listed in the docs)."""
     from dataclasses import replace
 
     from preland_app.sim.control import stopping_distance_m
