@@ -49,7 +49,8 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from fault_scenarios_table import SCENARIOS, scenario_request  # noqa: E402
 
 from preland_app.runtime.embedded import run_trial  # noqa: E402
-from preland_app.runtime.sitl import SitlOptions, resolve_sitl_binary, run_sitl_trial  # noqa: E402
+from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS, SitlOptions, resolve_sitl_binary, run_sitl_trial  # noqa: E402
+from preland_app.runtime.sitl_parm import read_parm_file  # noqa: E402
 from preland_app.runtime.sitl_log import (  # noqa: E402
     HIGH_PASS_S, attitude_estimate_errors_deg, high_passed, horizontal_estimate_errors, rms)
 from preland_app.sim.navigation import NavigationModel  # noqa: E402
@@ -90,15 +91,16 @@ def fly_one(job: tuple) -> tuple:
             time.perf_counter() - started, speedup, outcome.message, camera_hz, ekf)
 
 
-# The step of SITL's JSON physics (SIM_RATE_HZ in the packaged sitl_json_quadx.parm): at the same step a seed's
-# gusts take the same path on both from the start of the flight (sim/air.py).
-SITL_PHYSICS_RATE_HZ = 400.0
+# The step of SITL's JSON physics, as trials fly it: at the same step a seed's gusts take the same path on both
+# from the start of the flight (sim/air.py).
+SITL_PHYSICS_RATE_HZ = read_parm_file(JSON_QUADX_DEFAULTS)["SIM_RATE_HZ"]
 
 
 def _as_copter_4_6(request, *, navigation: dict[str, float]):
     environment = request.mission.environment
     environment = replace(environment, navigation=replace(environment.navigation, **navigation),
-                          autopilot=AutopilotSpec(firmware=Firmware.COPTER_4_6), physics_rate_hz=SITL_PHYSICS_RATE_HZ)
+                          autopilot=AutopilotSpec(firmware=Firmware.COPTER_4_6),
+                          physics_rate_hz=SITL_PHYSICS_RATE_HZ)
     return replace(request, mission=replace(request.mission, environment=environment))
 
 

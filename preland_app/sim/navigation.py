@@ -43,26 +43,17 @@ class NavEstimate:
     delta_velocity_east_m_s: float = 0.0
 
 
-def gps_drift(spec: NavigationSpec, noise: GaussianStream) -> tuple[SmoothGaussMarkov, SmoothGaussMarkov]:
-    """The GPS position error's slow drift, north and east (m): per axis a Gauss-Markov process of stationary
-    std `gps_drift_sigma_m` and time constant `gps_drift_tau_s`, low-pass filtered over `gps_drift_smooth_s`,
-    drawing from `noise` (north first)."""
-    def axis() -> SmoothGaussMarkov:
-        return SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
-                                 smooth_s=spec.gps_drift_smooth_s, noise=noise)
-
-    north = axis()
-    return north, axis()
-
-
 class GpsPositionError:
-    """The GPS position error, north and east (m): the slow drift (`gps_drift`) plus a fast noise
-    (`position_noise_sigma_m`, 1 s correlation), all drawing from the trial seed's `gps` stream in one fixed
-    order. The embedded autopilot's estimate and SITL's glitch offsets step the same one, so a seed gives the
-    same drift path on both."""
+    """The GPS position error, north and east (m): a slow drift (per axis a Gauss-Markov process of stationary
+    std `gps_drift_sigma_m` and time constant `gps_drift_tau_s`, low-pass filtered over `gps_drift_smooth_s`)
+    plus a fast noise (`position_noise_sigma_m`, 1 s correlation), all drawing from the trial seed's `gps`
+    stream in one fixed order. The embedded autopilot's estimate and SITL's glitch offsets step the same one,
+    so a seed gives the same drift path on both."""
 
     def __init__(self, *, spec: NavigationSpec, noise: GaussianStream) -> None:
-        self._drift_north, self._drift_east = gps_drift(spec, noise)
+        self._drift_north, self._drift_east = (
+            SmoothGaussMarkov(sigma=spec.gps_drift_sigma_m, tau_s=spec.gps_drift_tau_s,
+                              smooth_s=spec.gps_drift_smooth_s, noise=noise) for _ in range(2))
         self._fast_north = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
         self._fast_east = GaussMarkov(sigma=spec.position_noise_sigma_m, tau_s=_FAST_NOISE_TAU_S, noise=noise)
 
