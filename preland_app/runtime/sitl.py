@@ -56,6 +56,7 @@ from ..outcome import TrialOutcome
 from ..sim.navigation import GpsPositionError
 from ..sim.noise import child_rng
 from ..sim.air import AirAtVehicle
+from ..sim.autopilot import ARMING_DELAY_S
 from ..sim.imu import GyroError
 from ..sim.json_bridge import JsonBridge, JsonBridgeTimeout
 from ..sim.multirotor import QuadXFrame, QuadXMultirotor
@@ -292,6 +293,12 @@ def embedded_arming_s(environment: EnvironmentSpec) -> float:
     mission arms at the next poll, 0.1 s later). SITL's world is aligned to it: the GPS drift at SITL's arming,
     the air when SITL's motors first turn."""
     return environment.navigation.gps_fix_delay_s
+
+
+def embedded_motors_start_s(environment: EnvironmentSpec) -> float:
+    """When the embedded simulator's motors first turn as `copter-4.6` flies, in its seconds from the start:
+    ArduCopter's arming delay after its arming. SITL's air starts at this point of the seed's gust path."""
+    return embedded_arming_s(environment) + ARMING_DELAY_S
 
 
 class GpsErrorDriver:
@@ -606,7 +613,7 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
     params = {"PLND_ENABLED": 1, "PLND_TYPE": 1, **rangefinder_params(mission), **wind,
               **gps.params(), **mission.params, **options.extra_params}
     air = AirAtVehicle(environment=mission.environment, seed=request.seed,
-                       lead_on_ground_s=embedded_arming_s(mission.environment)) if on_preland_physics else None
+                       lead_on_ground_s=embedded_motors_start_s(mission.environment)) if on_preland_physics else None
     gyro_error = GyroError.for_mission(mission.environment.navigation, seed=request.seed,
                                        per_attitude_error=options.gyro_error) if on_preland_physics else None
     async with SitlInstance(options=options, params=params, heading_deg=mission.initial_yaw_deg,

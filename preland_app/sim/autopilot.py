@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 from ..errors import CommandDenied
 from ..vehicle.types import FlightMode, LandedState, LandingTarget
+from .shaping import AltitudeShaper, PositionShaper
 from .control import HorizontalController, VerticalController, sqrt_controller, stopping_distance_m
 from .dynamics import GRAVITY_M_S2, ActuatorDemand
 from .navigation import NavEstimate
@@ -37,6 +38,7 @@ from .spec import Firmware
 LAND_DETECTOR_TRIGGER_S = 1.0  # ArduCopter LAND_DETECTOR_TRIGGER_SEC
 LAND_DETECTOR_MAYBE_TRIGGER_S = 0.2  # LAND_DETECTOR_MAYBE_TRIGGER_SEC
 LAND_RANGEFINDER_MIN_ALT_M = 2.0  # LAND_RANGEFINDER_MIN_ALT_CM
+ARMING_DELAY_S = 2.0  # ArduCopter config.h ARMING_DELAY_SEC: motors spin this long after arming
 # mode_land.cpp's precision-landing slow-down near the ground.
 PRECLAND_SLOWDOWN_MIN_HEIGHT_M = 0.35
 PRECLAND_SLOWDOWN_MAX_HEIGHT_M = 2.0
@@ -94,6 +96,8 @@ class Autopilot:
         self.messages: list[StatusText] = []
         self.landing_targets_received = 0
         self.precland = PrecisionLandingEstimator(params, firmware=firmware)
+        # copter-4.6: the position controller's kinematic target (AC_PosControl 4.1+); None when not running
+        self._shaper: PositionShaper | None = None
         self.retry = LandingRetry(params)
         self._precland_active = False
         self._retry_hold: tuple[float, float, float] | None = None
@@ -117,6 +121,9 @@ class Autopilot:
         self._rtl_alt_m = 0.0
         self._land_detector_s = 0.0
         self._landed_since_s = 0.0
+        self._armed_at_s = 0.0
+        self._takeoff_at_s = 0.0
+        self._climb_shaper: AltitudeShaper | None = None  # copter-4.6's take-off target
         self._now_s = 0.0
         self.last_climb_demand_m_s = 0.0
 
@@ -169,6 +176,7 @@ class Autopilot:
         self.armed = True
         self.land_complete = True
         self._landed_since_s = self._now_s
+        self._armed_at_s = self._now_s
         # ArduCopter sets home where it arms.
         self.home_north_m, self.home_east_m, self.home_down_m = nav.north_m, nav.east_m, nav.down_m
         self.home_set = True
@@ -195,6 +203,8 @@ class Autopilot:
         # at a position, LOITER or POSHOLD it holds the target it had. 3.6/4.0's LAND holds the stopping point.
         keeps_xy_target = (self.firmware is Firmware.COPTER_4_6 and mode is FlightMode.LAND
                            and self._holds_xy_target())
+        if not keeps_xy_target:
+            self._shaper = None
         self.mode = mode
         if not keeps_xy_target:
             self._xy.reset(velocity_north_m_s=nav.velocity_north_m_s, velocity_east_m_s=nav.velocity_east_m_s)
@@ -243,6 +253,8 @@ class Autopilot:
         if altitude_rel_m <= 0:
             raise CommandDenied(operation="takeoff", reason="altitude must be > 0 m")
         self._guided = GuidedTarget.TAKEOFF
+        self._takeoff_at_s = self._now_s
+        self._climb_shaper = None
         self._target_north_m, self._target_east_m = nav.north_m, nav.east_m
         self._target_down_m = self.home_down_m - altitude_rel_m
         self._xy.reset()
@@ -342,7 +354,13 @@ class Autopilot:
         if self.mode is FlightMode.LAND or (self.mode is FlightMode.RTL):
             self.disarm(reason="landed")
             return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
-        if self.mode is FlightMode.GUIDED and self._guided is GuidedTarget.TAKEOFF:
+        if self.firmware is Firmware.COPTER_4_6 and self._now_s - self._armed_at_s < ARMING_DELAY_S:
+            # motors.cpp: the motor interlock stays off during the arming delay
+            self._xy.reset()
+            self._z.reset()
+            return ActuatorDemand(motors_armed=False, yaw_rad=yaw_rad)
+        taking_off = self.mode is FlightMode.GUIDED and self._guided is GuidedTarget.TAKEOFF
+        if taking_off and self._now_s >= self._liftoff_s():
             self.land_complete = False
             self._say("Taking off")
             return self._run_guided(dt_s, nav)
@@ -353,6 +371,16 @@ class Autopilot:
         self._xy.reset()
         self._z.reset()
         return ActuatorDemand(motors_armed=True, yaw_rad=yaw_rad, climb_rate_m_s=-0.5)
+
+    def _liftoff_s(self) -> float:
+        """When a commanded take-off leaves the ground, s. `copter-4.6` (takeoff.cpp _AutoTakeoff::run): after the
+        arming delay the motors spool up (MOT_SPOOL_TIME), then the throttle ramps at 1 / TKOFF_SLEW_TIME a
+        second until the vehicle climbs, at about the hover throttle (MOT_THST_HOVER). 3.6/4.0: at once."""
+        if self.firmware is not Firmware.COPTER_4_6:
+            return self._takeoff_at_s
+        p = self.params
+        start_s = max(self._takeoff_at_s, self._armed_at_s + ARMING_DELAY_S)
+        return start_s + p.value("MOT_SPOOL_TIME") + p.value("MOT_THST_HOVER") * p.value("TKOFF_SLEW_TIME")
 
     def _update_land_detector(self, dt_s: float, touching_ground: bool, demand: ActuatorDemand) -> None:
         # Motors at their lower limit happens when the ground pushes back against a descent demand.
@@ -376,6 +404,7 @@ class Autopilot:
     def _fly_to(self, dt_s: float, nav: NavEstimate, north_m: float | None, east_m: float | None,
                 down_m: float | None, *, speed_max_m_s: float, climb_rate_m_s: float | None = None,
                 velocity_ff: tuple[float, float] = (0.0, 0.0),
+                accel_ff: tuple[float, float] | None = None,
                 velocity_feedback: tuple[float, float] | None = None,
                 loiter: bool = False) -> ActuatorDemand:
         """One position-control step. `loiter`: the position controller as AC_Loiter sets it up (LOITER,
@@ -399,6 +428,7 @@ class Autopilot:
             target_east_m=east_m,
             velocity_ff_north_m_s=velocity_ff[0],
             velocity_ff_east_m_s=velocity_ff[1],
+            accel_ff_ne_m_s2=accel_ff,
             speed_max_m_s=speed_max_m_s,
             accel_max_m_s2=accel_max_m_s2,
             pos_p=p.value("PSC_POSXY_P"),
@@ -426,13 +456,18 @@ class Autopilot:
     def _run_guided(self, dt_s: float, nav: NavEstimate) -> ActuatorDemand:
         p = self.params
         if self._guided is GuidedTarget.TAKEOFF:
-            if -nav.down_m >= -self._target_down_m - TAKEOFF_COMPLETE_MARGIN_M:
+            climb_rate_m_s, complete = (self._shaped_takeoff_climb_rate(dt_s, nav)
+                                        if self.firmware is Firmware.COPTER_4_6 else
+                                        (self._takeoff_climb_rate(nav),
+                                         -nav.down_m >= -self._target_down_m - TAKEOFF_COMPLETE_MARGIN_M))
+            if complete:
                 self._guided = GuidedTarget.POSITION
+                self._climb_shaper = None
                 self._say("Takeoff complete")
             return self._fly_to(dt_s, nav, self._target_north_m, self._target_east_m, self._target_down_m,
-                                speed_max_m_s=p.m_s("WPNAV_SPEED"),
-                                climb_rate_m_s=self._takeoff_climb_rate(nav))
+                                speed_max_m_s=p.m_s("WPNAV_SPEED"), climb_rate_m_s=climb_rate_m_s)
         if self._guided is GuidedTarget.VELOCITY:
+            self._shaper = None  # a later position target starts the path from the vehicle's state
             if self._now_s - self._velocity_target_time_s > p.value("GUID_TIMEOUT"):
                 # ArduCopter stops the vehicle when velocity commands stop arriving.
                 self._velocity_target = (0.0, 0.0, 0.0)
@@ -441,8 +476,26 @@ class Autopilot:
             return self._fly_to(dt_s, nav, None, None, None, speed_max_m_s=p.m_s("LOIT_SPEED"),
                                 climb_rate_m_s=max(-p.m_s("WPNAV_SPEED_DN"), min(p.m_s("WPNAV_SPEED_UP"), -vd)),
                                 velocity_ff=(vn, ve))
+        if self.firmware is Firmware.COPTER_4_6:
+            # 4.1+: the target moves along a jerk-limited path to the position (input_pos_xyz), followed
+            # with its velocity as feed-forward
+            shaper = self._running_shaper(nav)
+            shaper.to_position((self._target_north_m, self._target_east_m), dt_s=dt_s,
+                               speed_max_m_s=p.m_s("WPNAV_SPEED"), accel_max_m_s2=p.m_s("WPNAV_ACCEL"),
+                               jerk_max_m_s3=p.value("PSC_JERK_XY"))
+            north_m, east_m = shaper.position_ne_m
+            return self._fly_to(dt_s, nav, north_m, east_m, self._target_down_m, speed_max_m_s=p.m_s("WPNAV_SPEED"),
+                                velocity_ff=(shaper.velocity_ne_m_s[0], shaper.velocity_ne_m_s[1]),
+                                accel_ff=(shaper.accel_ne_m_s2[0], shaper.accel_ne_m_s2[1]))
         return self._fly_to(dt_s, nav, self._target_north_m, self._target_east_m, self._target_down_m,
                             speed_max_m_s=p.m_s("WPNAV_SPEED"))
+
+    def _running_shaper(self, nav: NavEstimate) -> PositionShaper:
+        """The position controller's kinematic target, started from the vehicle's state (init_xy_controller)."""
+        if self._shaper is None:
+            self._shaper = PositionShaper(position_ne_m=(nav.north_m, nav.east_m),
+                                          velocity_ne_m_s=(nav.velocity_north_m_s, nav.velocity_east_m_s))
+        return self._shaper
 
     def _takeoff_climb_rate(self, nav: NavEstimate) -> float:
         p = self.params
@@ -450,6 +503,27 @@ class Autopilot:
             target_alt_m=-self._target_down_m, est_alt_m=-nav.down_m, pos_p=p.value("PSC_POSZ_P"),
             accel_max_m_s2=p.m_s("WPNAV_ACCEL_Z"), speed_up_m_s=p.m_s("WPNAV_SPEED_UP"),
             speed_down_m_s=p.m_s("WPNAV_SPEED_DN"))
+
+    def _shaped_takeoff_climb_rate(self, dt_s: float, nav: NavEstimate) -> tuple[float, bool]:
+        """4.1+'s take-off (_AutoTakeoff::run): the altitude target moves along a jerk-limited path from where
+        the vehicle left the ground (input_pos_vel_accel_z), followed with its climb rate as feed-forward.
+        Returns the climb-rate demand (m/s up) and whether the take-off is complete: the target within the
+        stopping distance of a tenth of the climb speed, and climbing slower than that."""
+        p = self.params
+        speed_up_m_s, accel_m_s2 = p.m_s("WPNAV_SPEED_UP"), p.m_s("WPNAV_ACCEL_Z")
+        if self._climb_shaper is None:
+            # the lift-off is declared when the measured climb acceleration reaches half WPNAV_ACCEL_Z, and
+            # init_z_controller starts the target with it
+            self._climb_shaper = AltitudeShaper(altitude_m=-nav.down_m, climb_rate_m_s=-nav.velocity_down_m_s,
+                                                accel_up_m_s2=0.5 * accel_m_s2)
+        shaper = self._climb_shaper
+        target_m = -self._target_down_m
+        shaper.to_altitude(target_m, dt_s=dt_s, speed_up_m_s=speed_up_m_s, speed_down_m_s=p.m_s("WPNAV_SPEED_DN"),
+                           accel_max_m_s2=accel_m_s2, jerk_max_m_s3=p.value("PSC_JERK_Z"))
+        correction = sqrt_controller(shaper.altitude_m - (-nav.down_m), p.value("PSC_POSZ_P"), accel_m_s2)
+        slow_m_s = 0.1 * speed_up_m_s
+        complete = shaper.altitude_m >= target_m - 0.5 * slow_m_s ** 2 / accel_m_s2 and shaper.climb_rate_m_s < slow_m_s
+        return shaper.climb_rate_m_s + correction, complete
 
     def land_descent_rate_m_s(self) -> float:
         """mode_land.cpp's land_run_vertical_control, as a (negative) climb rate in m/s."""
@@ -476,6 +550,8 @@ class Autopilot:
             for text in self.retry.messages[self._retry_messages_seen:]:
                 self._say(text)
             self._retry_messages_seen = len(self.retry.messages)
+            if directive.action in (Action.GOTO, Action.HOLD):
+                self._shaper = None  # the retry flies its own targets from here on
             if directive.action is Action.GOTO:
                 self._retry_hold = None
                 self._precland_active = False
@@ -493,6 +569,7 @@ class Autopilot:
                 if not self._precland_active:
                     self._say("PrecLand: target acquired")
                 self._precland_active = True
+                self._shaper = None
                 north_m, east_m = target
                 self._target_north_m, self._target_east_m = target
                 climb_rate = self._precland_descent_rate_m_s(nav, target, climb_rate)
@@ -518,6 +595,16 @@ class Autopilot:
                 self._say("PrecLand: target lost")
                 north_m, east_m = self._stopping_point()
                 self._target_north_m, self._target_east_m = north_m, east_m
+        if self._shaper is not None:
+            # 4.6's LAND from a running position controller: its target stops along its path
+            # (input_vel_accel_xy with zero velocity), at LAND's WPNAV_ACCEL
+            p = self.params
+            self._shaper.to_stop(dt_s=dt_s, accel_max_m_s2=p.m_s("WPNAV_ACCEL"), jerk_max_m_s3=p.value("PSC_JERK_XY"))
+            north_m, east_m = self._shaper.position_ne_m
+            return self._fly_to(dt_s, nav, north_m, east_m, None, speed_max_m_s=p.m_s("LOIT_SPEED"),
+                                climb_rate_m_s=climb_rate, loiter=True,
+                                velocity_ff=(self._shaper.velocity_ne_m_s[0], self._shaper.velocity_ne_m_s[1]),
+                                accel_ff=(self._shaper.accel_ne_m_s2[0], self._shaper.accel_ne_m_s2[1]))
         return self._fly_to(dt_s, nav, north_m, east_m, None, speed_max_m_s=self.params.m_s("LOIT_SPEED"),
                             climb_rate_m_s=climb_rate, loiter=True)
 

@@ -67,6 +67,7 @@ class HorizontalController:
         target_east_m: float | None,
         velocity_ff_north_m_s: float,
         velocity_ff_east_m_s: float,
+        accel_ff_ne_m_s2: tuple[float, float] | None = None,
         speed_max_m_s: float,
         accel_max_m_s2: float,
         pos_p: float,
@@ -79,7 +80,9 @@ class HorizontalController:
 
         With a target position, the velocity demand is the sqrt controller's
         correction plus the feed-forward; without one, it is the feed-forward
-        alone. Its change is limited to `accel_max_m_s2`.
+        alone. Its change is limited to `accel_max_m_s2`, and that change is the acceleration feed-forward,
+        unless `accel_ff_ne_m_s2` is given: then the feed-forward comes from a kinematic target (AC_PosControl
+        4.1+, whose target already moves within the limits) and the demand is not slewed.
         """
         want_north, want_east = velocity_ff_north_m_s, velocity_ff_east_m_s
         if target_north_m is not None and target_east_m is not None:
@@ -97,18 +100,11 @@ class HorizontalController:
         if speed > speed_max_m_s > 0:
             want_north *= speed_max_m_s / speed
             want_east *= speed_max_m_s / speed
-        # Shape the velocity demand by the acceleration limit (as the S-curve does).
-        delta_north = want_north - self.velocity_demand_north_m_s
-        delta_east = want_east - self.velocity_demand_east_m_s
-        delta = math.hypot(delta_north, delta_east)
-        max_delta = accel_max_m_s2 * dt_s
-        if delta > max_delta > 0:
-            delta_north *= max_delta / delta
-            delta_east *= max_delta / delta
-        self.velocity_demand_north_m_s += delta_north
-        self.velocity_demand_east_m_s += delta_east
-        feedforward_north = delta_north / dt_s
-        feedforward_east = delta_east / dt_s
+        if accel_ff_ne_m_s2 is not None:
+            self.velocity_demand_north_m_s, self.velocity_demand_east_m_s = want_north, want_east
+            feedforward_north, feedforward_east = accel_ff_ne_m_s2
+        else:
+            feedforward_north, feedforward_east = self._slew(want_north, want_east, accel_max_m_s2, dt_s)
 
         vel_error_north = self.velocity_demand_north_m_s - est_velocity_north_m_s
         vel_error_east = self.velocity_demand_east_m_s - est_velocity_east_m_s
@@ -132,6 +128,20 @@ class HorizontalController:
         pitch_rad = math.atan(-accel_forward / GRAVITY_M_S2)
         roll_rad = math.atan(accel_right * math.cos(pitch_rad) / GRAVITY_M_S2)
         return roll_rad, pitch_rad
+
+    def _slew(self, want_north: float, want_east: float, accel_max_m_s2: float, dt_s: float) -> tuple[float, float]:
+        """Move the velocity demand towards the wanted one by at most `accel_max_m_s2` (as the S-curve does);
+        returns the acceleration that took (m/s/s, NE)."""
+        delta_north = want_north - self.velocity_demand_north_m_s
+        delta_east = want_east - self.velocity_demand_east_m_s
+        delta = math.hypot(delta_north, delta_east)
+        max_delta = accel_max_m_s2 * dt_s
+        if delta > max_delta > 0:
+            delta_north *= max_delta / delta
+            delta_east *= max_delta / delta
+        self.velocity_demand_north_m_s += delta_north
+        self.velocity_demand_east_m_s += delta_east
+        return delta_north / dt_s, delta_east / dt_s
 
 
 class VerticalController:

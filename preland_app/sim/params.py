@@ -90,8 +90,19 @@ ARDUCOPTER_PARAMS: dict[str, ParamInfo] = {
     "PSC_VELXY_P": ParamInfo(2.0, "1/s", "horizontal velocity P gain", 0.1, 6.0, kind=REAL32),
     "PSC_VELXY_I": ParamInfo(1.0, "1/s/s", "horizontal velocity I gain", 0.02, 1.0, kind=REAL32),
     "PSC_VELXY_IMAX": ParamInfo(1000, "cm/s/s", "horizontal velocity I limit", 0, 4500, kind=REAL32),
+    # AC_PosControl.cpp (4.1+): the jerk of the position target's path; `copter-4.6` shapes with it
+    "PSC_JERK_XY": ParamInfo(5.0, "m/s/s/s", "horizontal jerk limit of the position target's path", 1.0, 20.0,
+                             kind=REAL32),
+    "PSC_JERK_Z": ParamInfo(5.0, "m/s/s/s", "vertical jerk limit of the position target's path", 5.0, 50.0,
+                            kind=REAL32),
     "PSC_POSZ_P": ParamInfo(1.0, "1/s", "vertical position P gain", 1.0, 3.0, kind=REAL32),
     "PSC_VELZ_P": ParamInfo(5.0, "1/s", "vertical velocity P gain", 1.0, 8.0, kind=REAL32),
+    # Take-off of `copter-4.6` (AP_MotorsMulticopter.h defaults; ArduCopter/Parameters.cpp TKOFF_SLEW_TIME): the
+    # motors spool up, then the throttle ramps until the vehicle leaves the ground at about the hover throttle.
+    "MOT_SPOOL_TIME": ParamInfo(0.5, "s", "motor spool-up time", 0.05, 2.0, kind=REAL32),
+    "MOT_THST_HOVER": ParamInfo(0.35, "", "hover throttle", 0.125, 0.6875, kind=REAL32),
+    "TKOFF_SLEW_TIME": ParamInfo(2.0, "s", "take-off throttle slew time (0 to full throttle)", 0.25, 5.0,
+                                 kind=REAL32),
     # Landing (mode_land.cpp; ArduCopter/Parameters.h).
     "LAND_SPEED": ParamInfo(50, "cm/s", "descent speed for the final stage of landing", 30, 200, kind=INT16),
     "LAND_SPEED_HIGH": ParamInfo(0, "cm/s", "descent speed above LAND_ALT_LOW (0: WPNAV_SPEED_DN)", 0, 500,
