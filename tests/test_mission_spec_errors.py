@@ -33,6 +33,10 @@ CASES = {
                      "expected a list of 2 values"),
     "unknown_param": (GOOD + "params:\n  LAND_SPEEED: 30\n", "params.LAND_SPEEED", "unknown autopilot parameter"),
     "top_level_list": ("- 1\n- 2\n", "", "expected a mapping at the top level"),
+    # the take-off and target-shaping parameters only the embedded copter-4.6 model uses
+    "param_of_another_firmware": (GOOD + "params:\n  TKOFF_SLEW_TIME: 3\n", "params.TKOFF_SLEW_TIME",
+                                  "used only with `environment.autopilot.firmware: copter-4.6`; this mission's is "
+                                  "copter-4.0"),
     # YAML reads an unquoted 4.6 as a number, which names no release: the line says which names do.
     "firmware_as_number": (GOOD + "environment:\n  autopilot:\n    firmware: 4.6\n", "environment.autopilot.firmware",
                            "one of copter-4.0, copter-4.6"),
@@ -106,3 +110,9 @@ def test_a_binary_mission_or_campaign_file_gives_one_line(tmp_path, content, pro
         message = result.stderr.strip()
         assert len(message.splitlines()) == 1 and "Traceback" not in result.output, message
         assert message.startswith(f"preland: error: {path}: ") and problem in message, message
+
+
+def test_a_copter_4_6_parameter_loads_when_the_mission_flies_copter_4_6(tmp_path):
+    text = GOOD + "params:\n  PSC_JERK_XY: 8\nenvironment:\n  autopilot:\n    firmware: copter-4.6\n"
+    mission = load_mission(_variant(tmp_path, text))
+    assert mission.params == {"PSC_JERK_XY": 8.0}

@@ -4,7 +4,8 @@ import math
 
 import pytest
 
-from preland_app.sim.shaping import PositionShaper, sqrt_controller
+from preland_app.sim.control import sqrt_controller
+from preland_app.sim.shaping import PositionShaper
 
 ACCEL_M_S2 = 2.5  # WPNAV_ACCEL
 JERK_M_S3 = 5.0  # PSC_JERK_XY
@@ -63,3 +64,24 @@ def test_a_stop_comes_to_rest_along_the_path_within_the_limits():
     # along the velocity's line, beyond the distance of a braking at the full acceleration (v^2 / 2a)
     assert north == pytest.approx(east, abs=1e-9)
     assert math.hypot(north, east) > 2.0 / (2 * ACCEL_M_S2)
+
+
+def test_a_climb_keeps_its_limits_and_arrives_as_arducopter_4_6_s_take_off_does():
+    from preland_app.sim.shaping import AltitudeShaper
+
+    # WPNAV_ACCEL_Z 1 m/s/s, PSC_JERK_Z 5 m/s/s/s, WPNAV_SPEED_UP 2.5 m/s; started as at lift-off
+    shaper = AltitudeShaper(altitude_m=0.0, accel_up_m_s2=0.5)
+    rates, accels = [], [0.5]
+    for _ in range(round(10.0 / DT_S)):
+        shaper.to_altitude(6.0, dt_s=DT_S, speed_up_m_s=2.5, speed_down_m_s=1.5, accel_max_m_s2=1.0,
+                           jerk_max_m_s3=5.0)
+        rates.append(shaper.climb_rate_m_s)
+        accels.append(shaper.accel_up_m_s2)
+    assert max(abs(a) for a in accels) <= 1.0 + 1e-9
+    assert max(abs(b - a) for a, b in zip(accels, accels[1:])) <= 5.0 * DT_S + 1e-9
+    assert shaper.altitude_m == pytest.approx(6.0, abs=0.01)
+    # ArduCopter 4.6.3 SITL's desired climb rate (CTUN.DCRt) on the thesis mission's 6 m take-off peaks at
+    # 1.92 m/s, 2.2 s after lift-off
+    peak = max(range(len(rates)), key=rates.__getitem__)
+    assert 1.8 < rates[peak] < 2.1, rates[peak]
+    assert 1.9 < peak * DT_S < 2.6, peak * DT_S

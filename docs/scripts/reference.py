@@ -321,15 +321,19 @@ def autopilot_page() -> str:
         return "" if value is None else _number(float(value))
 
     rows = [(f"`{name}`", _number(float(info.default)), info.units, f"{bound(info.minimum)} .. {bound(info.maximum)}",
-             info.kind.name, "yes" if info.ardupilot else "no (embedded only)", info.description)
+             info.kind.name, "yes" if info.ardupilot else "no (embedded only)",
+             f"`{info.firmware.value}`" if info.firmware else "any", info.description)
             for name, info in ARDUCOPTER_PARAMS.items()]
     return (GENERATED + "# Autopilot parameters\n\n"
             "The parameters the embedded autopilot reads, by ArduPilot's names, units and defaults (ArduCopter "
             "4.6), with their documented ranges and ArduPilot's storage types. A mission sets them under "
             "`params:` (and a scenario under its own `params:`); a value outside its range is refused at "
             "load. Over MAVLink (`preland sim serve`) the same parameters are served with these types; the "
-            "`PRL_` parameters belong to the embedded autopilot alone and are never served.\n\n"
-            + _table(("name", "default", "unit", "range", "type", "served over MAVLink", "meaning"), rows))
+            "`PRL_` parameters belong to the embedded autopilot alone and are never served. A parameter the "
+            "embedded autopilot uses only as one firmware (`environment.autopilot.firmware`) is refused in a "
+            "mission that flies another.\n\n"
+            + _table(("name", "default", "unit", "range", "type", "served over MAVLink", "firmware", "meaning"),
+                     rows))
 
 
 def land_modes_page() -> str:

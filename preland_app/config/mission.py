@@ -250,6 +250,11 @@ class MissionSpec:
                 "must be a non-empty word (letters, digits, _ . -)")
         for name in self.params:
             require(name in ARDUCOPTER_PARAMS, f"params.{name}", "unknown autopilot parameter")
+            firmware = ARDUCOPTER_PARAMS[name].firmware  # the one firmware whose model uses it, if only one
+            mission_firmware = self.environment.autopilot.firmware
+            require(firmware in (None, mission_firmware), f"params.{name}",
+                    f"used only with `environment.autopilot.firmware: {firmware and firmware.value}`; this "
+                    f"mission's is {mission_firmware.value}")
         options = self.params.get("PLND_OPTIONS")
         # Bit 1 changes what happens after a pilot repositions the vehicle with the sticks; no mission has
         # a pilot on the sticks, so the bit could only be carried and never act.

@@ -11,20 +11,26 @@ import math
 from .dynamics import GRAVITY_M_S2
 
 
-def sqrt_controller(error: float, p_gain: float, accel_max: float) -> float:
-    """AC_PosControl's sqrt controller: linear near zero, constant-deceleration far away.
-
-    Returns the correction rate for a position error so that the vehicle can
-    stop at `accel_max` (same units per second).
-    """
-    if accel_max <= 0.0 or p_gain <= 0.0:
-        return error * p_gain
-    linear_dist = accel_max / (p_gain * p_gain)
-    if error > linear_dist:
-        return math.sqrt(2.0 * accel_max * (error - linear_dist / 2.0))
-    if error < -linear_dist:
-        return -math.sqrt(2.0 * accel_max * (-error - linear_dist / 2.0))
-    return error * p_gain
+def sqrt_controller(error: float, p_gain: float, accel_max: float, dt_s: float = 0.0) -> float:
+    """AC_PosControl's sqrt controller (AP_Math/control.cpp `sqrt_controller`): linear near zero,
+    constant-deceleration far away, so that the vehicle can stop at `accel_max` (the error's units per second
+    per second); the square root alone when `p_gain` is 0. Given `dt_s`, it never passes zero in one step.
+    Returns the correction rate (the error's units per second)."""
+    if accel_max <= 0.0:
+        rate = error * p_gain
+    elif p_gain == 0.0:
+        rate = math.copysign(math.sqrt(2.0 * accel_max * abs(error)), error)
+    else:
+        linear_dist = accel_max / (p_gain * p_gain)
+        if error > linear_dist:
+            rate = math.sqrt(2.0 * accel_max * (error - linear_dist / 2.0))
+        elif error < -linear_dist:
+            rate = -math.sqrt(2.0 * accel_max * (-error - linear_dist / 2.0))
+        else:
+            rate = error * p_gain
+    if dt_s > 0.0:
+        return max(-abs(error) / dt_s, min(abs(error) / dt_s, rate))
+    return rate
 
 
 def stopping_distance_m(speed_m_s: float, p_gain: float, accel_max_m_s2: float) -> float:

@@ -17,6 +17,8 @@ from dataclasses import KW_ONLY, dataclass
 
 import numpy as np
 
+from .spec import Firmware
+
 
 class ParamKind(enum.Enum):
     """ArduPilot's storage type of a parameter, valued by its MAV_PARAM_TYPE on the wire."""
@@ -62,8 +64,9 @@ INT8, INT16, INT32, REAL32 = ParamKind.INT8, ParamKind.INT16, ParamKind.INT32, P
 
 @dataclass(frozen=True, slots=True)
 class ParamInfo:
-    """One parameter: default, units, meaning, documented range; `kind` is ArduPilot's storage type and
-    `ardupilot` False marks a parameter of preland's embedded autopilot only, never served over MAVLink."""
+    """One parameter: default, units, meaning, documented range; `kind` is ArduPilot's storage type,
+    `ardupilot` False marks a parameter of preland's embedded autopilot only, never served over MAVLink, and
+    `firmware` one that the embedded autopilot uses only as that firmware."""
 
     default: float
     units: str
@@ -73,6 +76,7 @@ class ParamInfo:
     _: KW_ONLY
     kind: ParamKind
     ardupilot: bool = True
+    firmware: Firmware | None = None
 
 
 ARDUCOPTER_PARAMS: dict[str, ParamInfo] = {
@@ -92,17 +96,17 @@ ARDUCOPTER_PARAMS: dict[str, ParamInfo] = {
     "PSC_VELXY_IMAX": ParamInfo(1000, "cm/s/s", "horizontal velocity I limit", 0, 4500, kind=REAL32),
     # AC_PosControl.cpp (4.1+): the jerk of the position target's path; `copter-4.6` shapes with it
     "PSC_JERK_XY": ParamInfo(5.0, "m/s/s/s", "horizontal jerk limit of the position target's path", 1.0, 20.0,
-                             kind=REAL32),
+                             kind=REAL32, firmware=Firmware.COPTER_4_6),
     "PSC_JERK_Z": ParamInfo(5.0, "m/s/s/s", "vertical jerk limit of the position target's path", 5.0, 50.0,
-                            kind=REAL32),
+                            kind=REAL32, firmware=Firmware.COPTER_4_6),
     "PSC_POSZ_P": ParamInfo(1.0, "1/s", "vertical position P gain", 1.0, 3.0, kind=REAL32),
     "PSC_VELZ_P": ParamInfo(5.0, "1/s", "vertical velocity P gain", 1.0, 8.0, kind=REAL32),
     # Take-off of `copter-4.6` (AP_MotorsMulticopter.h defaults; ArduCopter/Parameters.cpp TKOFF_SLEW_TIME): the
     # motors spool up, then the throttle ramps until the vehicle leaves the ground at about the hover throttle.
-    "MOT_SPOOL_TIME": ParamInfo(0.5, "s", "motor spool-up time", 0.05, 2.0, kind=REAL32),
-    "MOT_THST_HOVER": ParamInfo(0.35, "", "hover throttle", 0.125, 0.6875, kind=REAL32),
+    "MOT_SPOOL_TIME": ParamInfo(0.5, "s", "motor spool-up time", 0.05, 2.0, kind=REAL32, firmware=Firmware.COPTER_4_6),
+    "MOT_THST_HOVER": ParamInfo(0.35, "", "hover throttle", 0.125, 0.6875, kind=REAL32, firmware=Firmware.COPTER_4_6),
     "TKOFF_SLEW_TIME": ParamInfo(2.0, "s", "take-off throttle slew time (0 to full throttle)", 0.25, 5.0,
-                                 kind=REAL32),
+                                 kind=REAL32, firmware=Firmware.COPTER_4_6),
     # Landing (mode_land.cpp; ArduCopter/Parameters.h).
     "LAND_SPEED": ParamInfo(50, "cm/s", "descent speed for the final stage of landing", 30, 200, kind=INT16),
     "LAND_SPEED_HIGH": ParamInfo(0, "cm/s", "descent speed above LAND_ALT_LOW (0: WPNAV_SPEED_DN)", 0, 500,

@@ -1,36 +1,18 @@
-"""ArduCopter 4.1+'s kinematic shaping of the horizontal position target (AP_Math/control.cpp, read at
-Copter-4.6.3, 92b0cd78): `AC_PosControl` moves a desired position, velocity and acceleration along a
-jerk-limited path to the commanded position (`input_pos_xyz` -> `shape_pos_vel_accel_xy`) or to a stop
-(`input_vel_accel_xy` with zero velocity -> `shape_vel_accel_xy`), and the position loop then follows the
-desired position with its velocity as feed-forward. Positions NED in m, velocities m/s, accelerations m/s^2,
-jerk m/s^3; horizontal only.
+"""ArduCopter 4.1+'s kinematic shaping of the position target (AP_Math/control.cpp, read at Copter-4.6.3,
+92b0cd78): `AC_PosControl` moves a desired position, velocity and acceleration along a jerk-limited path to
+the commanded position (`input_pos_xyz` -> `shape_pos_vel_accel_xy`, and `shape_pos_vel_accel` on z) or to a
+stop (`input_vel_accel_xy` with zero velocity -> `shape_vel_accel_xy`), and the position loop then follows the
+desired position with its velocity and acceleration as feed-forward. Horizontal positions NED and altitudes
+up, in m; velocities m/s, accelerations m/s^2, jerk m/s^3.
 """
 
 from __future__ import annotations
 
 import math
 
+from .control import sqrt_controller
+
 CORNER_ACCELERATION_RATIO = 1.0 / math.sqrt(2.0)  # control.cpp: the share of acceleration kept for a turn
-
-
-def sqrt_controller(error: float, p: float, second_order_limit: float, dt_s: float) -> float:
-    """control.cpp `sqrt_controller`: linear (gain `p`) near zero, square-root beyond, and never past zero in
-    one step of `dt_s`."""
-    if second_order_limit <= 0.0:
-        rate = error * p
-    elif p == 0.0:
-        rate = math.copysign(math.sqrt(2.0 * second_order_limit * abs(error)), error) if error else 0.0
-    else:
-        linear_m = second_order_limit / (p * p)
-        if error > linear_m:
-            rate = math.sqrt(2.0 * second_order_limit * (error - linear_m / 2.0))
-        elif error < -linear_m:
-            rate = -math.sqrt(2.0 * second_order_limit * (-error - linear_m / 2.0))
-        else:
-            rate = error * p
-    if dt_s > 0.0:
-        return max(-abs(error) / dt_s, min(abs(error) / dt_s, rate))
-    return rate
 
 
 def _sqrt_controller_ne(north: float, east: float, p: float, limit: float, dt_s: float) -> tuple[float, float]:
