@@ -33,6 +33,27 @@ def sqrt_controller(error: float, p_gain: float, accel_max: float, dt_s: float =
     return rate
 
 
+def limit_length_ne(north: float, east: float, limit: float) -> tuple[float, float]:
+    """The vector (north, east) shortened to length `limit` when longer (Vector2f::limit_length); unchanged
+    when `limit` is not positive."""
+    length = math.hypot(north, east)
+    if length > limit > 0.0:
+        scale = limit / length
+        return north * scale, east * scale
+    return north, east
+
+
+def sqrt_controller_ne(north: float, east: float, p_gain: float, accel_max: float,
+                       dt_s: float = 0.0) -> tuple[float, float]:
+    """`sqrt_controller` on a horizontal error vector (AP_Math's Vector2f version): the correction along the
+    error, sized by the error's length; none for an error under a micrometre."""
+    length = math.hypot(north, east)
+    if length <= 1e-6:
+        return 0.0, 0.0
+    correction = sqrt_controller(length, p_gain, accel_max, dt_s)
+    return correction * north / length, correction * east / length
+
+
 def stopping_distance_m(speed_m_s: float, p_gain: float, accel_max_m_s2: float) -> float:
     """Distance to stop from `speed_m_s` under the sqrt controller (inverse of it)."""
     if accel_max_m_s2 <= 0 or p_gain <= 0:
@@ -94,18 +115,13 @@ class HorizontalController:
         if target_north_m is not None and target_east_m is not None:
             error_north = target_north_m - est_north_m
             error_east = target_east_m - est_east_m
-            distance = math.hypot(error_north, error_east)
-            self.position_error_m = distance
-            if distance > 1e-6:
-                correction = sqrt_controller(distance, pos_p, accel_max_m_s2)
-                want_north += correction * error_north / distance
-                want_east += correction * error_east / distance
+            self.position_error_m = math.hypot(error_north, error_east)
+            correction_north, correction_east = sqrt_controller_ne(error_north, error_east, pos_p, accel_max_m_s2)
+            want_north += correction_north
+            want_east += correction_east
         else:
             self.position_error_m = 0.0
-        speed = math.hypot(want_north, want_east)
-        if speed > speed_max_m_s > 0:
-            want_north *= speed_max_m_s / speed
-            want_east *= speed_max_m_s / speed
+        want_north, want_east = limit_length_ne(want_north, want_east, speed_max_m_s)
         if accel_ff_ne_m_s2 is not None:
             self.velocity_demand_north_m_s, self.velocity_demand_east_m_s = want_north, want_east
             feedforward_north, feedforward_east = accel_ff_ne_m_s2
@@ -116,17 +132,11 @@ class HorizontalController:
         vel_error_east = self.velocity_demand_east_m_s - est_velocity_east_m_s
         self._integrator_north += vel_i * vel_error_north * dt_s
         self._integrator_east += vel_i * vel_error_east * dt_s
-        integrator = math.hypot(self._integrator_north, self._integrator_east)
-        if integrator > vel_imax_m_s2 > 0:
-            self._integrator_north *= vel_imax_m_s2 / integrator
-            self._integrator_east *= vel_imax_m_s2 / integrator
+        self._integrator_north, self._integrator_east = limit_length_ne(self._integrator_north,
+                                                                        self._integrator_east, vel_imax_m_s2)
         accel_north = feedforward_north + vel_p * vel_error_north + self._integrator_north
         accel_east = feedforward_east + vel_p * vel_error_east + self._integrator_east
-        accel_limit = GRAVITY_M_S2 * math.tan(angle_max_rad)
-        accel = math.hypot(accel_north, accel_east)
-        if accel > accel_limit:
-            accel_north *= accel_limit / accel
-            accel_east *= accel_limit / accel
+        accel_north, accel_east = limit_length_ne(accel_north, accel_east, GRAVITY_M_S2 * math.tan(angle_max_rad))
         # AC_PosControl::accel_to_lean_angles
         cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
         accel_forward = accel_north * cy + accel_east * sy
@@ -138,13 +148,8 @@ class HorizontalController:
     def _slew(self, want_north: float, want_east: float, accel_max_m_s2: float, dt_s: float) -> tuple[float, float]:
         """Move the velocity demand towards the wanted one by at most `accel_max_m_s2` (as the S-curve does);
         returns the acceleration that took (m/s/s, NE)."""
-        delta_north = want_north - self.velocity_demand_north_m_s
-        delta_east = want_east - self.velocity_demand_east_m_s
-        delta = math.hypot(delta_north, delta_east)
-        max_delta = accel_max_m_s2 * dt_s
-        if delta > max_delta > 0:
-            delta_north *= max_delta / delta
-            delta_east *= max_delta / delta
+        delta_north, delta_east = limit_length_ne(want_north - self.velocity_demand_north_m_s,
+                                                  want_east - self.velocity_demand_east_m_s, accel_max_m_s2 * dt_s)
         self.velocity_demand_north_m_s += delta_north
         self.velocity_demand_east_m_s += delta_east
         return delta_north / dt_s, delta_east / dt_s

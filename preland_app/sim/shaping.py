@@ -10,24 +10,9 @@ from __future__ import annotations
 
 import math
 
-from .control import sqrt_controller
+from .control import limit_length_ne, sqrt_controller, sqrt_controller_ne
 
 CORNER_ACCELERATION_RATIO = 1.0 / math.sqrt(2.0)  # control.cpp: the share of acceleration kept for a turn
-
-
-def _sqrt_controller_ne(north: float, east: float, p: float, limit: float, dt_s: float) -> tuple[float, float]:
-    length = math.hypot(north, east)
-    if length <= 0.0:
-        return 0.0, 0.0
-    scale = sqrt_controller(length, p, limit, dt_s) / length
-    return north * scale, east * scale
-
-
-def _limit_length(north: float, east: float, limit: float) -> tuple[float, float]:
-    length = math.hypot(north, east)
-    if length > limit > 0.0:
-        return north * limit / length, east * limit / length
-    return north, east
 
 
 class PositionShaper:
@@ -45,9 +30,9 @@ class PositionShaper:
         """One step towards `target_ne_m` (`input_pos_xyz`'s horizontal part)."""
         self._advance(dt_s)
         error_north, error_east = target_ne_m[0] - self.position_ne_m[0], target_ne_m[1] - self.position_ne_m[1]
-        north, east = _sqrt_controller_ne(error_north, error_east, 0.5 * jerk_max_m_s3 / accel_max_m_s2,
+        north, east = sqrt_controller_ne(error_north, error_east, 0.5 * jerk_max_m_s3 / accel_max_m_s2,
                                           0.5 * accel_max_m_s2, dt_s)
-        self._shape_velocity(_limit_length(north, east, speed_max_m_s), accel_max_m_s2, jerk_max_m_s3, dt_s)
+        self._shape_velocity(limit_length_ne(north, east, speed_max_m_s), accel_max_m_s2, jerk_max_m_s3, dt_s)
 
     def to_stop(self, *, dt_s: float, accel_max_m_s2: float, jerk_max_m_s3: float) -> None:
         """One step of stopping (`input_vel_accel_xy` with zero velocity and acceleration)."""
@@ -63,25 +48,25 @@ class PositionShaper:
     def _shape_velocity(self, velocity_ne_m_s: tuple[float, float], accel_max_m_s2: float, jerk_max_m_s3: float,
                         dt_s: float) -> None:
         """`shape_vel_accel_xy` (no acceleration input, the correction limited, not the total)."""
-        accel = _sqrt_controller_ne(velocity_ne_m_s[0] - self.velocity_ne_m_s[0],
+        accel = sqrt_controller_ne(velocity_ne_m_s[0] - self.velocity_ne_m_s[0],
                                     velocity_ne_m_s[1] - self.velocity_ne_m_s[1],
                                     jerk_max_m_s3 / accel_max_m_s2, jerk_max_m_s3, dt_s)
         speed = math.hypot(*velocity_ne_m_s)
         if speed == 0.0:
-            accel = _limit_length(*accel, accel_max_m_s2)
+            accel = limit_length_ne(*accel, accel_max_m_s2)
         else:
             unit = (velocity_ne_m_s[0] / speed, velocity_ne_m_s[1] / speed)
             along = unit[0] * accel[0] + unit[1] * accel[1]
             cross = (accel[0] - unit[0] * along, accel[1] - unit[1] * along)
             if along * along <= cross[0] ** 2 + cross[1] ** 2:
-                accel = _limit_length(*accel, accel_max_m_s2)
+                accel = limit_length_ne(*accel, accel_max_m_s2)
             else:
-                cross = _limit_length(*cross, CORNER_ACCELERATION_RATIO * accel_max_m_s2)
+                cross = limit_length_ne(*cross, CORNER_ACCELERATION_RATIO * accel_max_m_s2)
                 along_max = math.sqrt(max(0.0, accel_max_m_s2 ** 2 - cross[0] ** 2 - cross[1] ** 2))
                 along = max(-along_max, min(along_max, along))
                 accel = (cross[0] + unit[0] * along, cross[1] + unit[1] * along)
         # shape_accel_xy: the acceleration moves towards its target at most jerk_max * dt a step
-        step = _limit_length(accel[0] - self.accel_ne_m_s2[0], accel[1] - self.accel_ne_m_s2[1], jerk_max_m_s3 * dt_s)
+        step = limit_length_ne(accel[0] - self.accel_ne_m_s2[0], accel[1] - self.accel_ne_m_s2[1], jerk_max_m_s3 * dt_s)
         self.accel_ne_m_s2[0] += step[0]
         self.accel_ne_m_s2[1] += step[1]
 
