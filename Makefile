@@ -57,10 +57,11 @@ bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/record.py error_budget.py
 	$(VENV)/bin/python benchmarks/record.py paper_table.py
 	@if [ -n "$$PRELAND_SITL_BINARY" ]; then $(VENV)/bin/python benchmarks/record.py sitl_vs_embedded.py && \
+	$(VENV)/bin/python benchmarks/record.py agreement_rule_noise.py && \
 	$(VENV)/bin/python benchmarks/record.py json_bridge_hover.py && \
 	$(VENV)/bin/python benchmarks/record.py sitl_air.py && \
 	$(VENV)/bin/python benchmarks/record.py drop_cost_witnesses.py --sitl "PRELAND_SITL_BINARY=$$PRELAND_SITL_BINARY"; \
-	else echo "benchmarks/sitl_vs_embedded.py, json_bridge_hover.py, sitl_air.py, drop_cost_witnesses.py skipped: set PRELAND_SITL_BINARY to an arducopter SITL binary"; fi
+	else echo "benchmarks/sitl_vs_embedded.py, agreement_rule_noise.py (it reads its record), json_bridge_hover.py, sitl_air.py, drop_cost_witnesses.py skipped: set PRELAND_SITL_BINARY to an arducopter SITL binary"; fi
 
 clean:
 	rm -rf $(VENV) build site *.egg-info

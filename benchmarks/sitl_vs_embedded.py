@@ -167,7 +167,8 @@ def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup
                   f"{navigation['attitude_noise_sigma_deg']:.3f} deg, horizontal velocity error rms "
                   f"{navigation['velocity_noise_sigma_m_s']:.3f} m/s, position error (high-passed over "
                   f"{HIGH_PASS_S:g} s) as position_noise_sigma_m {navigation['position_noise_sigma_m']:.3f} m")
-            jobs = [("embedded-4.6", label, seed, binary, None, navigation) for label in labels for seed in range(seeds)]
+            jobs = [("embedded-4.6", label, seed, binary, None, navigation)
+                    for label in labels for seed in range(seeds)]
             results += list(pool.map(fly_one, jobs, chunksize=1))
     for runtime in sitl_runtimes:
         if runtime == "sitl-preland":
@@ -187,7 +188,8 @@ def _table(results: list[tuple], *, runtime: str, embedded: str, labels: list[st
               if embedded == "embedded-4.6" else "the embedded simulator as it is by default (copter-4.0)")
     print(f"\nthesis scenarios, {seeds} seeds each, SITL {at} beside {beside} (error cm, landing time s)")
     print(f"{'scenario':<22} {'SITL landed':>11} {'mean':>6} {'max':>6} {'time':>6}   {'emb landed':>10} {'mean':>6} "
-          f"{'max':>6} {'time':>6}   {'mean x':>6} {'max x':>6} {'time x':>6}  agree  {'SITL-emb':>7} {'p':>6} {'Holm p':>6}  cam Hz SITL/emb")
+          f"{'max':>6} {'time':>6}   {'mean x':>6} {'max x':>6} {'time x':>6}  agree  "
+          f"{'SITL-emb':>7} {'p':>6} {'Holm p':>6}  cam Hz SITL/emb")
     agreed = judged = 0
     lines, pvalues, shifts, cameras = [], {}, {}, {}
     for label in labels:
@@ -250,7 +252,8 @@ def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int, label
             shared = sorted(set(errors) & set(baseline))
             change = _mean([abs(errors[s] - baseline[s]) for s in shared])
         per_core = len(results) / (wall_s / 60.0) / workers
-        print(f"{speedup:>7g} {len(errors):>3}/{len(results):<2} {per_core:15.2f} {_mean([r[6] for r in results]):12.1f} "
+        print(f"{speedup:>7g} {len(errors):>3}/{len(results):<2} {per_core:15.2f} "
+              f"{_mean([r[6] for r in results]):12.1f} "
               f"{_fmt(_mean(list(errors.values())), 8)} {_fmt(change, 26)} "
               f"{_fmt(_mean([r[9] for r in results if r[9] is not None]), 9)}")
         for r in results:
