@@ -1,17 +1,18 @@
 """How often `sitl_vs_embedded.py`'s agreement rule (means within 30 % or 3 cm) calls one model apart from
-itself, on the thesis' Tables 3 to 5: what an agreement count from 10 seeds can tell.
+itself, on the thesis' Tables 3 to 5: what an agreement count from 10 or 20 seeds a scenario can tell.
 
 The model is the embedded simulator as `sitl_vs_embedded.py` flies it beside SITL on preland's physics
 (`copter-4.6` at SITL's physics step, with the EKF errors of that benchmark's latest record).
 
-- **Other seeds:** the same model on seeds 0..N-1, in blocks of `--block` seeds; the rule between every
-  ordered pair of blocks (nothing differs but the seeds).
-- **The same seeds, a nudged estimate:** seeds 0..block-1 again with every EKF error `--nudge` larger and
-  smaller (as two records' pooled EKF errors differ); the rule and the paired signed-rank test (Holm over
-  the scenarios) of each beside the unchanged model. The seeds are shared, as SITL's and the embedded
-  simulator's are in the comparison.
+- **Other seeds:** the same model on seeds 0..N-1, in blocks of each size in `--blocks` (10 and 20 seeds a
+  scenario, the comparison's former and present default); the rule between every ordered pair of blocks
+  of a size (nothing differs but the seeds).
+- **The same seeds, a nudged estimate:** seeds 0..B-1 (B the first block size) again with every EKF error
+  `--nudge` larger and smaller (as two records' pooled EKF errors differ); the rule and the paired
+  signed-rank test (Holm over the scenarios) of each beside the unchanged model. The seeds are shared, as
+  SITL's and the embedded simulator's are in the comparison.
 
-Usage: python benchmarks/agreement_rule_noise.py [--seeds 40] [--block 10] [--nudge 0.035] [--workers W]
+Usage: python benchmarks/agreement_rule_noise.py [--seeds 40] [--blocks 10,20] [--nudge 0.035] [--workers W]
 """
 
 from __future__ import annotations
@@ -67,20 +68,42 @@ def _mean(errors: dict[int, float | None], seeds: range) -> float:
     return statistics.mean(errors[seed] for seed in seeds if errors[seed] is not None)
 
 
+def _between_blocks(base: dict[str, dict[int, float | None]], size: int, seeds: int) -> None:
+    blocks = [range(start, start + size) for start in range(0, seeds - size + 1, size)]
+    print(f"\nmean landing error (cm) of each block of {size} seeds; lost: landings over 1 m")
+    print(f"{'scenario':<22} " + " ".join(f"{f'{b.start}..{b.stop - 1}':>8}" for b in blocks) + "   lost")
+    for label in JUDGED:
+        lost = sum(e is not None and e > 100 for e in base[label].values())
+        print(f"{label:<22} " + " ".join(f"{_mean(base[label], b):8.1f}" for b in blocks) + f"   {lost}/{seeds}")
+    counts = []
+    print(f"the rule between blocks of {size} (first in SITL's place): scenarios that agree, of {len(JUDGED)}")
+    for first, second in itertools.permutations(range(len(blocks)), 2):
+        a, b = blocks[first], blocks[second]
+        apart = [label for label in JUDGED if not agrees(_mean(base[label], a), _mean(base[label], b))]
+        counts.append(len(JUDGED) - len(apart))
+        print(f"  {a.start}..{a.stop - 1} beside {b.start}..{b.stop - 1}: {counts[-1]}"
+              + (f" (apart: {', '.join(apart)})" if apart else ""))
+    print(f"blocks of {size}, agree over {len(counts)} ordered pairs: min {min(counts)}, median "
+          f"{statistics.median(counts):g}, max {max(counts)}; at least 11 in {sum(c >= 11 for c in counts)} "
+          f"of {len(counts)}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=40)
-    parser.add_argument("--block", type=int, default=10)
+    parser.add_argument("--blocks", default="10,20", help="comma-separated block sizes (seeds)")
     parser.add_argument("--nudge", type=float, default=0.035, help="relative change of each EKF error")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     args = parser.parse_args()
-    if args.seeds < 2 * args.block:
-        parser.error("--seeds: at least two blocks")
+    sizes = [int(size) for size in args.blocks.split(",")]
+    if min(sizes) < 1 or args.seeds < 2 * max(sizes):
+        parser.error("--seeds: at least two blocks of each size")
+    block = sizes[0]
     navigation = recorded_navigation()
     nudged = {f"{sign:+.1%}": {name: value * (1 + sign) for name, value in navigation.items()}
               for sign in (args.nudge, -args.nudge)}
     jobs = [(label, seed, navigation) for label in JUDGED for seed in range(args.seeds)]
-    jobs += [(label, seed, each) for each in nudged.values() for label in JUDGED for seed in range(args.block)]
+    jobs += [(label, seed, each) for each in nudged.values() for label in JUDGED for seed in range(block)]
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         results = list(pool.map(fly, jobs, chunksize=2))
     base = {label: {} for label in JUDGED}
@@ -90,32 +113,17 @@ def main() -> None:
           f"deg, velocity {navigation['velocity_noise_sigma_m_s']:g} m/s, "
           f"position {navigation['position_noise_sigma_m']:g} m")
 
-    blocks = [range(start, start + args.block) for start in range(0, args.seeds - args.block + 1, args.block)]
-    print(f"\nmean landing error (cm) of each block of {args.block} seeds; lost: landings over 1 m")
-    print(f"{'scenario':<22} " + " ".join(f"{f'{b.start}..{b.stop - 1}':>8}" for b in blocks) + "   lost")
-    for label in JUDGED:
-        lost = sum(e is not None and e > 100 for e in base[label].values())
-        print(f"{label:<22} " + " ".join(f"{_mean(base[label], b):8.1f}" for b in blocks) + f"   {lost}/{args.seeds}")
-    counts = []
-    print(f"\nthe rule between blocks (first in SITL's place): scenarios that agree, of {len(JUDGED)}")
-    for first, second in itertools.permutations(range(len(blocks)), 2):
-        apart = [label for label in JUDGED
-                 if not agrees(_mean(base[label], blocks[first]), _mean(base[label], blocks[second]))]
-        counts.append(len(JUDGED) - len(apart))
-        a, b = blocks[first], blocks[second]
-        print(f"  {a.start}..{a.stop - 1} beside {b.start}..{b.stop - 1}: {counts[-1]}"
-              + (f" (apart: {', '.join(apart)})" if apart else ""))
-    print(f"agree over {len(counts)} ordered pairs: min {min(counts)}, median {statistics.median(counts):g}, "
-          f"max {max(counts)}; at least 11 in {sum(c >= 11 for c in counts)} of {len(counts)}")
+    for size in sizes:
+        _between_blocks(base, size, args.seeds)
 
-    print(f"\nthe same seeds 0..{args.block - 1}, every EKF error nudged, beside the model unchanged")
+    print(f"\nthe same seeds 0..{block - 1}, every EKF error nudged, beside the model unchanged")
     offset = len(JUDGED) * args.seeds
     for index, name in enumerate(nudged):
-        chunk = results[offset + index * len(JUDGED) * args.block: offset + (index + 1) * len(JUDGED) * args.block]
+        chunk = results[offset + index * len(JUDGED) * block: offset + (index + 1) * len(JUDGED) * block]
         errors = {label: {} for label in JUDGED}
         for label, seed, error in chunk:
             errors[label][seed] = error
-        seeds = range(args.block)
+        seeds = range(block)
         apart, pvalues = [], {}
         for label in JUDGED:
             if not agrees(_mean(errors[label], seeds), _mean(base[label], seeds)):

@@ -11,6 +11,8 @@ larger. Beside that rule, each precision scenario's per-seed differences (SITL m
 where both landed) get a two-sided Wilcoxon signed-rank test, Holm-corrected over the scenarios judged: a
 scenario "differs" when its adjusted p is below 0.05. The rule judges means of heavy-tailed errors from 10
 seeds (one lost pad moves a mean by 25 cm); the paired test says which differences the seeds support.
+20 seeds a scenario by default: on 10, the rule calls the embedded simulator apart from itself on other
+seeds in most pairs of seed sets (`agreement_rule_noise.py`).
 
 On preland's physics the embedded simulator is flown twice: as it is by default (ArduCopter 3.6/4.0's
 precision landing and the mission's estimate errors, fitted to the field), and as the autopilot SITL runs:
@@ -27,7 +29,7 @@ across speedups, so this measures how far results move.
 
 Needs an arducopter SITL binary: --sitl PATH or $PRELAND_SITL_BINARY.
 
-Usage: python benchmarks/sitl_vs_embedded.py [--seeds 10] [--workers 2] [--only LABEL,...]
+Usage: python benchmarks/sitl_vs_embedded.py [--seeds 20] [--workers 2] [--only LABEL,...]
                                              [--physics preland,ardupilot]
                                              [--speedups 5,10,20,50] [--sweep-seeds 6] [--skip-compare]
                                              [--sweep-scenarios LABEL,...] [--skip-sweep]
@@ -264,7 +266,7 @@ def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int, label
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sitl", default=None, help="arducopter binary (default $PRELAND_SITL_BINARY)")
-    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--speedup", type=float, default=None,
                         help="SITL speedup of the comparison (default: preland's, 2x with a camera, else 10x)")
