@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from fault_scenarios_table import SCENARIOS, scenario_request  # noqa: E402
-from sitl_vs_embedded import PAIRED_ALPHA, _as_copter_4_6, _signed_rank_p  # noqa: E402
+from sitl_vs_embedded import PAIRED_ALPHA, as_copter_4_6, signed_rank_p  # noqa: E402
 
 from preland_app.campaign.fidelity_tests import holm  # noqa: E402
 from preland_app.runtime.embedded import run_trial  # noqa: E402
@@ -55,7 +55,7 @@ def recorded_navigation() -> dict[str, float]:
 
 def fly(job: tuple[str, int, dict[str, float]]) -> tuple[str, int, float | None]:
     label, seed, navigation = job
-    outcome = run_trial(_as_copter_4_6(scenario_request(label, seed), navigation=navigation))
+    outcome = run_trial(as_copter_4_6(scenario_request(label, seed), navigation=navigation))
     return label, seed, outcome.landing_error_cm if outcome.outcome.value == "landed" else None
 
 
@@ -129,7 +129,7 @@ def main() -> None:
             if not agrees(_mean(errors[label], seeds), _mean(base[label], seeds)):
                 apart.append(f"{label} {_mean(errors[label], seeds):.1f}/{_mean(base[label], seeds):.1f}")
             shared = [s for s in seeds if errors[label][s] is not None and base[label][s] is not None]
-            pvalues[label] = _signed_rank_p([errors[label][s] - base[label][s] for s in shared])
+            pvalues[label] = signed_rank_p([errors[label][s] - base[label][s] for s in shared])
         adjusted = holm({label: p for label, p in pvalues.items() if p is not None})
         differ = sum(p < PAIRED_ALPHA for p in adjusted.values())
         print(f"  {name}: the rule {len(JUDGED) - len(apart)} of {len(JUDGED)} agree"

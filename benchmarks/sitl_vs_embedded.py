@@ -9,8 +9,8 @@ shared world: what differs from the embedded simulator is the autopilot), and `a
 physics and sensors. A precision scenario "agrees" when the means are within 30 % or 3 cm, whichever is
 larger. Beside that rule, each precision scenario's per-seed differences (SITL minus embedded, the seeds
 where both landed) get a two-sided Wilcoxon signed-rank test, Holm-corrected over the scenarios judged: a
-scenario "differs" when its adjusted p is below 0.05. The rule judges means of heavy-tailed errors from 10
-seeds (one lost pad moves a mean by 25 cm); the paired test says which differences the seeds support.
+scenario "differs" when its adjusted p is below 0.05. The rule judges means of heavy-tailed errors (one
+lost pad among 10 seeds moves a mean by 25 cm); the paired test says which differences the seeds support.
 20 seeds a scenario by default: on 10, the rule calls the embedded simulator apart from itself on other
 seeds in most pairs of seed sets (`agreement_rule_noise.py`).
 
@@ -90,7 +90,7 @@ def fly_one(job: tuple) -> tuple:
             log.with_suffix(".tlog").unlink(missing_ok=True)
     else:
         if runtime == "embedded-4.6":
-            request = _as_copter_4_6(request, navigation=extra)
+            request = as_copter_4_6(request, navigation=extra)
         outcome = run_trial(request)
     frames = outcome.details.get("marker_frames")
     camera_hz = frames / outcome.landing_time_s if frames and outcome.landing_time_s else None
@@ -103,7 +103,7 @@ def fly_one(job: tuple) -> tuple:
 SITL_PHYSICS_RATE_HZ = read_parm_file(JSON_QUADX_DEFAULTS)["SIM_RATE_HZ"]
 
 
-def _as_copter_4_6(request, *, navigation: dict[str, float]):
+def as_copter_4_6(request, *, navigation: dict[str, float]):
     environment = request.mission.environment
     environment = replace(environment, navigation=replace(environment.navigation, **navigation),
                           autopilot=AutopilotSpec(firmware=Firmware.COPTER_4_6),
@@ -137,9 +137,9 @@ def ekf_navigation(results: list[tuple]) -> dict[str, float]:
 PAIRED_ALPHA = 0.05  # family-wise, over the precision scenarios of one table
 
 
-def _signed_rank_p(differences: list[float]) -> float | None:
-    """Two-sided Wilcoxon signed-rank p of paired differences (exact for a few seeds without ties); 1.0 when
-    every difference is 0, None without any."""
+def signed_rank_p(differences: list[float]) -> float | None:
+    """Two-sided Wilcoxon signed-rank p of paired differences (scipy's; exact for small samples without ties);
+    1.0 when every difference is 0, None without any."""
     if not differences:
         return None
     if not any(differences):
@@ -219,7 +219,7 @@ def _table(results: list[tuple], *, runtime: str, embedded: str, labels: list[st
             judged, agreed, agree = judged + 1, agreed + within, "yes" if within else "NO"
             differences = [by_seed[runtime][seed] - by_seed[embedded][seed]
                            for seed in sorted(set(by_seed[runtime]) & set(by_seed[embedded]))]
-            shifts[label], pvalues[label] = _mean(differences), _signed_rank_p(differences)
+            shifts[label], pvalues[label] = _mean(differences), signed_rank_p(differences)
         lines.append((label, f"{label:<22} {s[0]:>7}/{s[1]:<3} {_fmt(s[2], 6)} {_fmt(s[3], 6)} {_fmt(s[4], 6)}   "
                       f"{e[0]:>6}/{e[1]:<3} {_fmt(e[2], 6)} {_fmt(e[3], 6)} {_fmt(e[4], 6)}   "
                       f"{_fmt(ratio(s[2], e[2]), 6, 2)} {_fmt(ratio(s[3], e[3]), 6, 2)} "
