@@ -5,7 +5,7 @@ import math
 import pytest
 
 from preland_app.sim.control import sqrt_controller
-from preland_app.sim.shaping import PositionShaper
+from preland_app.sim.shaping import AltitudeShaper, PositionShaper
 
 ACCEL_M_S2 = 2.5  # WPNAV_ACCEL
 JERK_M_S3 = 5.0  # PSC_JERK_XY
@@ -67,8 +67,6 @@ def test_a_stop_comes_to_rest_along_the_path_within_the_limits():
 
 
 def test_a_climb_keeps_its_limits_and_arrives_as_arducopter_4_6_s_take_off_does():
-    from preland_app.sim.shaping import AltitudeShaper
-
     # WPNAV_ACCEL_Z 1 m/s/s, PSC_JERK_Z 5 m/s/s/s, WPNAV_SPEED_UP 2.5 m/s; started as at lift-off
     shaper = AltitudeShaper(altitude_m=0.0, accel_up_m_s2=0.5)
     rates, accels = [], [0.5]

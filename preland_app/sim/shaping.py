@@ -31,7 +31,7 @@ class PositionShaper:
         self._advance(dt_s)
         error_north, error_east = target_ne_m[0] - self.position_ne_m[0], target_ne_m[1] - self.position_ne_m[1]
         north, east = sqrt_controller_ne(error_north, error_east, 0.5 * jerk_max_m_s3 / accel_max_m_s2,
-                                          0.5 * accel_max_m_s2, dt_s)
+                                         0.5 * accel_max_m_s2, dt_s)
         self._shape_velocity(limit_length_ne(north, east, speed_max_m_s), accel_max_m_s2, jerk_max_m_s3, dt_s)
 
     def to_stop(self, *, dt_s: float, accel_max_m_s2: float, jerk_max_m_s3: float) -> None:
@@ -49,8 +49,8 @@ class PositionShaper:
                         dt_s: float) -> None:
         """`shape_vel_accel_xy` (no acceleration input, the correction limited, not the total)."""
         accel = sqrt_controller_ne(velocity_ne_m_s[0] - self.velocity_ne_m_s[0],
-                                    velocity_ne_m_s[1] - self.velocity_ne_m_s[1],
-                                    jerk_max_m_s3 / accel_max_m_s2, jerk_max_m_s3, dt_s)
+                                   velocity_ne_m_s[1] - self.velocity_ne_m_s[1],
+                                   jerk_max_m_s3 / accel_max_m_s2, jerk_max_m_s3, dt_s)
         speed = math.hypot(*velocity_ne_m_s)
         if speed == 0.0:
             accel = limit_length_ne(*accel, accel_max_m_s2)
