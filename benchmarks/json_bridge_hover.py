@@ -332,7 +332,9 @@ def fmt(value: float | None, spec: str) -> str:
 
 def landings(binary: str, seeds: int, workers: int) -> None:
     """The GPS-only landing distribution on both physics, side by side (see the module)."""
-    jobs = [(runtime, GPS_ONLY_LABEL, seed, binary, None) for seed in range(seeds) for runtime, _ in LANDING_RUNTIMES]
+    # (runtime, label, seed, binary, speedup, log folder): preland's speedup, no dataflash logs kept.
+    jobs = [(runtime, GPS_ONLY_LABEL, seed, binary, None, None)
+            for seed in range(seeds) for runtime, _ in LANDING_RUNTIMES]
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
         results = list(pool.map(fly_one, jobs, chunksize=1))

@@ -71,15 +71,15 @@ SWEEP_LABEL = "T3 marker"
 def fly_one(job: tuple) -> tuple:
     """(runtime, label, seed, outcome, error cm, landing time s, wall s, speedup, message, camera Hz, EKF errors);
     runtime `embedded`, `embedded-4.6` (with `navigation`, the estimate errors to fly with), `sitl` (ArduPilot's
-    physics) or `sitl-preland` (preland's, in lock-step, its dataflash log kept in `log_dir` for its EKF errors:
-    (attitude deg, velocity m/s, position m) lists, else None)."""
+    physics) or `sitl-preland` (preland's, in lock-step; with a folder `extra`, its dataflash log is kept there for
+    its EKF errors: (attitude deg, velocity m/s, position m) lists, else None)."""
     runtime, label, seed, binary, speedup, extra = job  # speedup None: preland's default
     started = time.perf_counter()
     request = scenario_request(label, seed)
     ekf = None
     if runtime.startswith("sitl"):
         physics = "preland" if runtime == "sitl-preland" else "ardupilot"
-        log_dir = Path(extra) if runtime == "sitl-preland" else None
+        log_dir = Path(extra) if runtime == "sitl-preland" and extra is not None else None
         name = f"{label.replace(' ', '_').replace('<', 'lt').replace('>', 'gt')}_seed{seed}.tlog"
         outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup, physics=physics,
                                                               log_dir=log_dir), tlog_name=name)
