@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 from pymavlink import mavutil  # noqa: E402
 from scipy import stats  # noqa: E402
-from sitl_vs_embedded import fly_one  # noqa: E402
+from sitl_vs_embedded import Trial, fly_one  # noqa: E402
 
 from preland_app.runtime.sitl import JSON_QUADX_DEFAULTS, PACKAGED_DEFAULTS, find_copter_defaults  # noqa: E402
 from preland_app.runtime.sitl_parm import read_parm_file  # noqa: E402
@@ -332,9 +332,7 @@ def fmt(value: float | None, spec: str) -> str:
 
 def landings(binary: str, seeds: int, workers: int) -> None:
     """The GPS-only landing distribution on both physics, side by side (see the module)."""
-    # (runtime, label, seed, binary, speedup, log folder): preland's speedup, no dataflash logs kept.
-    jobs = [(runtime, GPS_ONLY_LABEL, seed, binary, None, None)
-            for seed in range(seeds) for runtime, _ in LANDING_RUNTIMES]
+    jobs = [Trial(runtime, GPS_ONLY_LABEL, seed, binary) for seed in range(seeds) for runtime, _ in LANDING_RUNTIMES]
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
         results = list(pool.map(fly_one, jobs, chunksize=1))

@@ -46,6 +46,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -68,18 +69,31 @@ SWEEP_LABEL = "T3 marker"
 # so at a high speedup it processes fewer frames per vehicle second than the camera's 30.
 
 
-def fly_one(job: tuple) -> tuple:
+class Trial(NamedTuple):
+    """One trial of a scenario on a runtime: `embedded`, `embedded-4.6` (flown with `navigation`, the estimate
+    errors), `sitl` (ArduPilot's physics at `speedup`, None: preland's default) or `sitl-preland` (preland's, in
+    lock-step; with `log_dir`, its dataflash log is kept there for its EKF errors)."""
+
+    runtime: str
+    label: str
+    seed: int
+    binary: str
+    speedup: float | None = None
+    log_dir: str | None = None
+    navigation: dict[str, float] | None = None
+
+
+def fly_one(trial: Trial) -> tuple:
     """(runtime, label, seed, outcome, error cm, landing time s, wall s, speedup, message, camera Hz, EKF errors);
-    runtime `embedded`, `embedded-4.6` (with `navigation`, the estimate errors to fly with), `sitl` (ArduPilot's
-    physics) or `sitl-preland` (preland's, in lock-step; with a folder `extra`, its dataflash log is kept there for
-    its EKF errors: (attitude deg, velocity m/s, position m) lists, else None)."""
-    runtime, label, seed, binary, speedup, extra = job  # speedup None: preland's default
+    the EKF errors are (attitude deg, velocity m/s, position m) lists for a `sitl-preland` trial with a
+    `log_dir`, else None."""
+    runtime, label, seed, binary, speedup, log_dir, navigation = trial
     started = time.perf_counter()
     request = scenario_request(label, seed)
     ekf = None
     if runtime.startswith("sitl"):
         physics = "preland" if runtime == "sitl-preland" else "ardupilot"
-        log_dir = Path(extra) if runtime == "sitl-preland" and extra is not None else None
+        log_dir = Path(log_dir) if log_dir is not None else None
         name = f"{label.replace(' ', '_').replace('<', 'lt').replace('>', 'gt')}_seed{seed}.tlog"
         outcome = run_sitl_trial(request, options=SitlOptions(binary=Path(binary), speedup=speedup, physics=physics,
                                                               log_dir=log_dir), tlog_name=name)
@@ -90,7 +104,7 @@ def fly_one(job: tuple) -> tuple:
             log.with_suffix(".tlog").unlink(missing_ok=True)
     else:
         if runtime == "embedded-4.6":
-            request = as_copter_4_6(request, navigation=extra)
+            request = as_copter_4_6(request, navigation=navigation)
         outcome = run_trial(request)
     frames = outcome.details.get("marker_frames")
     camera_hz = frames / outcome.landing_time_s if frames and outcome.landing_time_s else None
@@ -160,7 +174,8 @@ def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup
     sitl_runtimes = ["sitl-preland" if p == "preland" else "sitl" for p in physics]
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as log_dir, ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = [(runtime, label, seed, binary, speedup if runtime == "sitl" else None, log_dir) for label in labels
+        jobs = [Trial(runtime, label, seed, binary, speedup if runtime == "sitl" else None,
+                      log_dir if runtime == "sitl-preland" else None) for label in labels
                 for seed in range(seeds) for runtime in (*sitl_runtimes, "embedded")]
         results = list(pool.map(fly_one, jobs, chunksize=1))
         if "sitl-preland" in sitl_runtimes:
@@ -169,7 +184,7 @@ def compare(*, binary: str, labels: list[str], seeds: int, workers: int, speedup
                   f"{navigation['attitude_noise_sigma_deg']:.3f} deg, horizontal velocity error rms "
                   f"{navigation['velocity_noise_sigma_m_s']:.3f} m/s, position error (high-passed over "
                   f"{HIGH_PASS_S:g} s) as position_noise_sigma_m {navigation['position_noise_sigma_m']:.3f} m")
-            jobs = [("embedded-4.6", label, seed, binary, None, navigation)
+            jobs = [Trial("embedded-4.6", label, seed, binary, navigation=navigation)
                     for label in labels for seed in range(seeds)]
             results += list(pool.map(fly_one, jobs, chunksize=1))
     for runtime in sitl_runtimes:
@@ -241,7 +256,7 @@ def sweep(*, binary: str, speedups: list[float], seeds: int, workers: int, label
           f"{'mean |change| cm vs first':>26} {'camera Hz':>9}")
     baseline: dict[int, float] | None = None
     for speedup in speedups:
-        jobs = [("sitl", label, seed, binary, speedup, None) for seed in range(seeds)]
+        jobs = [Trial("sitl", label, seed, binary, speedup) for seed in range(seeds)]
         started = time.perf_counter()
         with ProcessPoolExecutor(max_workers=workers) as pool:
             results = list(pool.map(fly_one, jobs, chunksize=1))
