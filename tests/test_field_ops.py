@@ -519,19 +519,72 @@ def test_a_stall_of_preland_itself_is_no_lost_link_until_it_has_read_what_came_m
         served.stop()
 
 
+class _Messages:
+    """What MAVSDK's message stream gives the backend: these (name, fields) messages of the vehicle, in order."""
+
+    def __init__(self, messages) -> None:
+        from types import SimpleNamespace
+
+        self.messages = [SimpleNamespace(message_name=name, fields_json=json.dumps(fields), system_id=1,
+                                         component_id=1) for name, fields in messages]
+
+    async def subscribe_message(self, name: str):
+        for message in self.messages:
+            yield message
+
+
+def _read(vehicle, *messages) -> None:
+    """The messages through the backend's own receive path."""
+    vehicle._direct = _Messages(messages)
+    asyncio.run(vehicle._listen())
+
+
+def _attitudes(first_ms: int, last_ms: int) -> list:
+    """ATTITUDE at 10 Hz, stamped `first_ms` to `last_ms` (time_boot_ms)."""
+    return [("ATTITUDE", {"time_boot_ms": ms}) for ms in range(first_ms, last_ms + 1, 100)]
+
+
+def _stamped_vehicle(monkeypatch):
+    vehicle, clock, now = _vehicle_at_a_frozen_wall_time(monkeypatch, rate=8.0)
+    clock.observe = lambda vehicle_s: setattr(clock, "newest_s", vehicle_s)  # the newest stamp read
+    return vehicle
+
+
 def test_a_vehicle_that_talks_without_heartbeats_has_lost_its_link_by_its_own_stamps(monkeypatch):
-    """Heartbeats stop while stamped messages keep coming: lost after 5 vehicle s by the vehicle's stamps,
-    within the 3 wall s that a wholly quiet link is given."""
+    """Heartbeats stop while stamped messages keep coming: lost after 5 vehicle s by the vehicle's stamps, at
+    a wall time that has not moved (within the 3 wall s that a wholly quiet link is given)."""
     from preland_app.errors import LinkLost
 
-    vehicle, clock, now = _vehicle_at_a_frozen_wall_time(monkeypatch, rate=8.0)
-    vehicle._last_heartbeat_wall = now - 0.7  # 5.6 vehicle s at 8x, but only 0.7 wall s
-    vehicle._last_message_wall = now
-    vehicle._heartbeat_stamp_s = 100.0
-    clock.newest_s = 104.9  # the vehicle has counted 4.9 s since its last heartbeat: not yet
-    vehicle._check_link("telemetry")
-    clock.newest_s = 105.2
+    vehicle = _stamped_vehicle(monkeypatch)
+    _read(vehicle, ("ATTITUDE", {"time_boot_ms": 100_000}), ("HEARTBEAT", {}), *_attitudes(100_100, 104_900))
+    vehicle._check_link("telemetry")  # the vehicle has counted 4.9 s since its last heartbeat: not yet
+    _read(vehicle, *_attitudes(105_000, 105_200))
     with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 5.2 vehicle s by the stamps of its other messages"):
+        vehicle._check_link("telemetry")
+
+
+def test_vehicle_time_whose_messages_were_lost_counts_as_no_talk_without_heartbeats(monkeypatch):
+    """A starved process's UDP receive buffer overflows: what the vehicle sent meanwhile is lost, its heartbeats
+    with the rest, and the stamps read jump (here 8.4 vehicle s: 0.84 wall s at 10x). That is no vehicle heard
+    talking without heartbeats; one heard doing so after the gap still loses its link after 5 s of it."""
+    from preland_app.errors import LinkLost
+
+    vehicle = _stamped_vehicle(monkeypatch)
+    _read(vehicle, ("ATTITUDE", {"time_boot_ms": 100_000}), ("HEARTBEAT", {}), *_attitudes(100_100, 100_500))
+    _read(vehicle, *_attitudes(108_900, 109_000))  # the first messages after the gap, before a heartbeat
+    vehicle._check_link("telemetry")
+    _read(vehicle, ("HEARTBEAT", {}), *_attitudes(109_100, 113_900))
+    vehicle._check_link("telemetry")  # 4.9 s heard since that heartbeat
+    _read(vehicle, *_attitudes(114_000, 114_200))
+    with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 5.2 vehicle s by the stamps of its other messages"):
+        vehicle._check_link("telemetry")
+    # Steps of up to HEARD_STEP_MAX_S (1 s) are heard time: a slow stream, a few messages lost.
+    vehicle = _stamped_vehicle(monkeypatch)
+    _read(vehicle, ("ATTITUDE", {"time_boot_ms": 100_000}), ("HEARTBEAT", {}),
+          *[("ATTITUDE", {"time_boot_ms": 100_000 + 1000 * k}) for k in range(1, 6)])
+    vehicle._check_link("telemetry")  # five 1 s steps: 5.0 s, not more
+    _read(vehicle, ("ATTITUDE", {"time_boot_ms": 105_200}))
+    with pytest.raises(LinkLost, match="no heartbeat for 5.2 vehicle s"):
         vehicle._check_link("telemetry")
 
 

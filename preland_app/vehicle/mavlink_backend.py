@@ -82,6 +82,11 @@ READ_MESSAGES = frozenset(STREAMS_HZ) | {"COMMAND_ACK", "PARAM_VALUE", "STATUSTE
 # of quiet too: MAVSDK's own heartbeat timeout (SystemImpl::_HEARTBEAT_TIMEOUT_S), after which it reports the
 # system disconnected. Up to 5/3x the 5 vehicle s alone decide; a SITL that has stopped is found within 3 wall s.
 LINK_LOST_MIN_WALL_S = 3.0
+# Stamped messages come at 10 Hz (STREAMS_HZ). Stamps further apart than this on the stream read mean the
+# messages between were lost (a starved process's UDP receive buffer overflows; what the vehicle sent
+# meanwhile, its heartbeats too, is gone): vehicle time nothing was heard in, not time the vehicle was heard
+# talking without heartbeats.
+HEARD_STEP_MAX_S = 1.0
 # preland's own event loop has stalled (a loaded machine, a long synchronous step) when its tick has not run for
 # this long: what the vehicle sent meanwhile waits unread, so the silence seen is not yet the vehicle's.
 LOOP_STALL_WALL_S = 0.5
@@ -147,6 +152,8 @@ class MavlinkVehicle:
         self._status_texts: list[str] = []
         self._last_heartbeat_wall: float | None = None
         self._heartbeat_stamp_s: float | None = None  # the newest vehicle time read when a heartbeat came
+        self._stamp_high_s: float | None = None  # the newest stamp read (s), for `_heard_stamp`
+        self._talked_s = 0.0  # vehicle s heard in stamped messages since the last heartbeat (HEARD_STEP_MAX_S)
         self._last_message_wall: float | None = None  # any message of the vehicle's
         self._sdk = None
         self._direct = None
@@ -360,6 +367,7 @@ class MavlinkVehicle:
             if name == "HEARTBEAT":
                 self._last_heartbeat_wall = self._last_message_wall
                 self._heartbeat_stamp_s = self._clock.newest_s
+                self._talked_s = 0.0
                 self._last_heartbeat_vehicle_s = self.clock.now_s()
                 self._heartbeats_read += 1
                 self._heartbeat_confirms(fields)
@@ -390,7 +398,18 @@ class MavlinkVehicle:
                 # which the newest time_boot_ms was read, so a backlog read late still reads as old.
                 self._sim_state_time_s = self._clock.now_s()
             if "time_boot_ms" in fields:
+                self._heard_stamp(fields["time_boot_ms"] / 1000.0)
                 self._clock.observe(fields["time_boot_ms"] / 1000.0)
+
+    def _heard_stamp(self, stamp_s: float) -> None:
+        """Count the vehicle seconds a stamped message moves the stream read on by, when heard step by step."""
+        high_s = self._stamp_high_s
+        if high_s is None or stamp_s < high_s - 1.0:  # the first, or the autopilot rebooted
+            self._stamp_high_s = stamp_s
+        elif stamp_s > high_s:
+            if stamp_s - high_s <= HEARD_STEP_MAX_S:
+                self._talked_s += stamp_s - high_s
+            self._stamp_high_s = stamp_s
 
     async def _tick(self) -> None:
         """Note, every _LOOP_TICK_WALL_S, that this process's event loop runs (see `_check_link`)."""
@@ -421,11 +440,10 @@ class MavlinkVehicle:
                                                           "lock-step")
         elif self._last_heartbeat_wall is not None:
             # A vehicle that still sends its stamped messages counts the silence itself: vehicle seconds by
-            # its own stamps, whatever the wall time. One that sends nothing is judged by wall time, and only
-            # after LINK_LOST_MIN_WALL_S of total quiet (a stall of either process is no lost link).
-            newest_s = self._clock.newest_s
-            talked_s = 0.0 if newest_s is None or self._heartbeat_stamp_s is None else \
-                newest_s - self._heartbeat_stamp_s
+            # its own stamps, whatever the wall time, but only those heard (HEARD_STEP_MAX_S). One that sends
+            # nothing is judged by wall time, and only after LINK_LOST_MIN_WALL_S of total quiet (a stall of
+            # either process is no lost link).
+            talked_s = self._talked_s
             if talked_s > self.link_timeout_s:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {talked_s:.1f} vehicle s by the "
                                                           "stamps of its other messages")
