@@ -466,6 +466,27 @@ def test_a_stall_shorter_than_three_wall_seconds_is_not_a_lost_link(monkeypatch)
         vehicle._check_link("telemetry")
 
 
+def test_a_check_run_after_the_tick_that_ends_a_stall_does_not_count_the_stall_as_quiet(monkeypatch):
+    """The machine stalls for 3.3 wall s, this process and a served vehicle on it alike, so the vehicle sent
+    nothing meanwhile. After it the event loop may run the tick before a check that fell due in the stall
+    (their timers' order): quiet is reckoned from the stall's end (a CI run stored a field tutorial's trial as
+    "nothing heard for 3.3 wall s"). A vehicle that stays quiet for LINK_LOST_MIN_WALL_S after it is lost."""
+    from preland_app.errors import LinkLost
+
+    vehicle, clock, now = _vehicle_at_a_frozen_wall_time(monkeypatch, rate=3.0)
+    vehicle._loop_ran(now - 3.3)  # the last tick before the stall
+    vehicle._last_heartbeat_wall = vehicle._last_message_wall = now - 3.3
+    vehicle._loop_ran(now)  # the first one after it
+    vehicle._check_link("telemetry")
+    for tick in range(1, 32):  # ticking every 0.1 s from then on; the vehicle says nothing
+        vehicle._loop_ran(now + 0.1 * tick)
+    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now + 2.9)
+    vehicle._check_link("telemetry")
+    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now + 3.1)
+    with pytest.raises(LinkLost, match="no heartbeat for 19.2 vehicle s at 3x, nothing heard for 3.1 wall s"):
+        vehicle._check_link("telemetry")
+
+
 def test_a_stall_of_preland_itself_is_no_lost_link_until_it_has_read_what_came_meanwhile(thesis_mission):
     """The companion's own event loop blocked for longer than LINK_LOST_MIN_WALL_S (a loaded machine): the
     vehicle's messages of meanwhile are waiting unread, so the link is not judged until they are read.

@@ -82,10 +82,9 @@ READ_MESSAGES = frozenset(STREAMS_HZ) | {"COMMAND_ACK", "PARAM_VALUE", "STATUSTE
 # of quiet too: MAVSDK's own heartbeat timeout (SystemImpl::_HEARTBEAT_TIMEOUT_S), after which it reports the
 # system disconnected. Up to 5/3x the 5 vehicle s alone decide; a SITL that has stopped is found within 3 wall s.
 LINK_LOST_MIN_WALL_S = 3.0
-# Stamped messages come at 10 Hz (STREAMS_HZ). Stamps further apart than this on the stream read mean the
-# messages between were lost (a starved process's UDP receive buffer overflows; what the vehicle sent
-# meanwhile, its heartbeats too, is gone): vehicle time nothing was heard in, not time the vehicle was heard
-# talking without heartbeats.
+# Stamped messages come at 10 Hz (STREAMS_HZ): stamps read further apart than this mean the messages between
+# were lost (a starved process's UDP receive buffer overflows, heartbeats and all), and that vehicle time is
+# not time the vehicle was heard talking without heartbeats.
 HEARD_STEP_MAX_S = 1.0
 # preland's own event loop has stalled (a loaded machine, a long synchronous step) when its tick has not run for
 # this long: what the vehicle sent meanwhile waits unread, so the silence seen is not yet the vehicle's.
@@ -164,6 +163,7 @@ class MavlinkVehicle:
         self._param_receipts = 0
         self._tasks: list[asyncio.Task] = []
         self._loop_ran_wall: float | None = None  # when the event loop last ran `_tick` (monotonic wall s)
+        self._resumed_wall = 0.0  # when `_tick` last ran after a stall of this process (monotonic wall s)
         self._closed = False
         self._connected = False
         self.system_id = 1
@@ -404,18 +404,23 @@ class MavlinkVehicle:
     def _heard_stamp(self, stamp_s: float) -> None:
         """Count the vehicle seconds a stamped message moves the stream read on by, when heard step by step."""
         high_s = self._stamp_high_s
-        if high_s is None or stamp_s < high_s - 1.0:  # the first, or the autopilot rebooted
-            self._stamp_high_s = stamp_s
-        elif stamp_s > high_s:
-            if stamp_s - high_s <= HEARD_STEP_MAX_S:
-                self._talked_s += stamp_s - high_s
+        if high_s is not None and high_s < stamp_s <= high_s + HEARD_STEP_MAX_S:
+            self._talked_s += stamp_s - high_s
+        if high_s is None or stamp_s > high_s or stamp_s < high_s - 1.0:  # newer, or the autopilot rebooted
             self._stamp_high_s = stamp_s
 
     async def _tick(self) -> None:
         """Note, every _LOOP_TICK_WALL_S, that this process's event loop runs (see `_check_link`)."""
         while True:
-            self._loop_ran_wall = time.monotonic()
+            self._loop_ran(time.monotonic())
             await asyncio.sleep(_LOOP_TICK_WALL_S)
+
+    def _loop_ran(self, now_wall_s: float) -> None:
+        # After a stall the tick may run before a check that was due in it, and before the messages sent
+        # meanwhile are read: quiet is reckoned from the stall's end, not from before it.
+        if self._loop_ran_wall is not None and now_wall_s - self._loop_ran_wall > LOOP_STALL_WALL_S:
+            self._resumed_wall = now_wall_s
+        self._loop_ran_wall = now_wall_s
 
     def _heartbeat_confirms(self, fields: dict[str, Any]) -> None:
         """Note a HEARTBEAT that reports a commanded state, so a later one reporting another counts at once."""
@@ -451,7 +456,8 @@ class MavlinkVehicle:
             if self._loop_ran_wall is not None and now_wall_s - self._loop_ran_wall > LOOP_STALL_WALL_S:
                 return  # this process stalled: the vehicle's messages of meanwhile are not read yet
             silent_vehicle_s = (now_wall_s - self._last_heartbeat_wall) * self._clock.rate
-            quiet_wall_s = now_wall_s - max(self._last_heartbeat_wall, self._last_message_wall or 0.0)
+            quiet_wall_s = now_wall_s - max(self._last_heartbeat_wall, self._last_message_wall or 0.0,
+                                            self._resumed_wall)
             if silent_vehicle_s > self.link_timeout_s and quiet_wall_s > LINK_LOST_MIN_WALL_S:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s at "
                                                           f"{self._clock.rate:.2g}x, nothing heard for "
