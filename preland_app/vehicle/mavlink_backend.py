@@ -398,8 +398,9 @@ class MavlinkVehicle:
                 # which the newest time_boot_ms was read, so a backlog read late still reads as old.
                 self._sim_state_time_s = self._clock.now_s()
             if "time_boot_ms" in fields:
-                self._heard_stamp(fields["time_boot_ms"] / 1000.0)
-                self._clock.observe(fields["time_boot_ms"] / 1000.0)
+                stamp_s = fields["time_boot_ms"] / 1000.0
+                self._heard_stamp(stamp_s)
+                self._clock.observe(stamp_s)
 
     def _heard_stamp(self, stamp_s: float) -> None:
         """Count the vehicle seconds a stamped message moves the stream read on by, when heard step by step."""
