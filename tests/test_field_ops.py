@@ -362,7 +362,7 @@ def _vehicle_at_a_frozen_wall_time(monkeypatch, *, rate: float):
     vehicle._clock = clock
     vehicle._direct = _OneMessage("HEARTBEAT", {})
     now = time.monotonic()
-    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now)
+    monkeypatch.setattr("preland_app.vehicle.link_watch.time.monotonic", lambda: now)
     return vehicle, clock, now
 
 
@@ -445,23 +445,23 @@ def test_a_stall_shorter_than_three_wall_seconds_is_not_a_lost_link(monkeypatch)
     LINK_LOST_MIN_WALL_S, MAVSDK's own heartbeat timeout) is no lost link; a silence of more than
     LINK_LOST_MIN_WALL_S (and 5 vehicle s) is."""
     from preland_app.errors import LinkLost
-    from preland_app.vehicle.mavlink_backend import LINK_LOST_MIN_WALL_S
+    from preland_app.vehicle.link_watch import LINK_LOST_MIN_WALL_S
 
     assert LINK_LOST_MIN_WALL_S == 3.0
     vehicle, clock, now = _vehicle_at_a_frozen_wall_time(monkeypatch, rate=40.0)
-    vehicle._last_heartbeat_wall = now - 2.9  # 116 vehicle s at 40x, 2.9 wall s: a stall
+    vehicle._link.last_heartbeat_wall = now - 2.9  # 116 vehicle s at 40x, 2.9 wall s: a stall
     vehicle._check_link("telemetry")
-    vehicle._last_heartbeat_wall = now - 3.1
+    vehicle._link.last_heartbeat_wall = now - 3.1
     with pytest.raises(LinkLost, match="telemetry.*no heartbeat for 124.0 vehicle s at 40x, nothing heard for 3.1 wall s"):
         vehicle._check_link("telemetry")
     # Up to 5/3x the vehicle seconds alone decide: 3.6 wall s is 5.4 vehicle s at 1.5x, lost.
-    vehicle._last_heartbeat_wall = now - 3.6
+    vehicle._link.last_heartbeat_wall = now - 3.6
     clock.rate = 1.5
     with pytest.raises(LinkLost, match="no heartbeat for 5.4 vehicle s at 1.5x, nothing heard for 3.6 wall s"):
         vehicle._check_link("telemetry")
     clock.rate = 1.0  # at 1x, 3.6 s of silence is within 5
     vehicle._check_link("telemetry")
-    vehicle._last_heartbeat_wall = now - 5.1
+    vehicle._link.last_heartbeat_wall = now - 5.1
     with pytest.raises(LinkLost, match="no heartbeat for 5.1 vehicle s at 1x, nothing heard for 5.1 wall s"):
         vehicle._check_link("telemetry")
 
@@ -474,15 +474,15 @@ def test_a_check_run_after_the_tick_that_ends_a_stall_does_not_count_the_stall_a
     from preland_app.errors import LinkLost
 
     vehicle, clock, now = _vehicle_at_a_frozen_wall_time(monkeypatch, rate=3.0)
-    vehicle._loop_ran(now - 3.3)  # the last tick before the stall
-    vehicle._last_heartbeat_wall = vehicle._last_message_wall = now - 3.3
-    vehicle._loop_ran(now)  # the first one after it
+    vehicle._link.loop_ran(now - 3.3)  # the last tick before the stall
+    vehicle._link.last_heartbeat_wall = vehicle._link.last_message_wall = now - 3.3
+    vehicle._link.loop_ran(now)  # the first one after it
     vehicle._check_link("telemetry")
     for tick in range(1, 32):  # ticking every 0.1 s from then on; the vehicle says nothing
-        vehicle._loop_ran(now + 0.1 * tick)
-    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now + 2.9)
+        vehicle._link.loop_ran(now + 0.1 * tick)
+    monkeypatch.setattr("preland_app.vehicle.link_watch.time.monotonic", lambda: now + 2.9)
     vehicle._check_link("telemetry")
-    monkeypatch.setattr("preland_app.vehicle.mavlink_backend.time.monotonic", lambda: now + 3.1)
+    monkeypatch.setattr("preland_app.vehicle.link_watch.time.monotonic", lambda: now + 3.1)
     with pytest.raises(LinkLost, match="no heartbeat for 19.2 vehicle s at 3x, nothing heard for 3.1 wall s"):
         vehicle._check_link("telemetry")
 
@@ -495,7 +495,8 @@ def test_a_stall_of_preland_itself_is_no_lost_link_until_it_has_read_what_came_m
     import time
 
     from preland_app.errors import LinkLost
-    from preland_app.vehicle.mavlink_backend import LINK_LOST_MIN_WALL_S, MavlinkVehicle
+    from preland_app.vehicle.link_watch import LINK_LOST_MIN_WALL_S
+    from preland_app.vehicle.mavlink_backend import MavlinkVehicle
 
     served = ServedSimulator(thesis_mission, seed=1, speedup=10.0)
 
@@ -504,17 +505,17 @@ def test_a_stall_of_preland_itself_is_no_lost_link_until_it_has_read_what_came_m
         said = []
         try:
             await vehicle.connect()
-            await until_async(lambda: vehicle._loop_ran_wall is not None and vehicle._clock.settled,
+            await until_async(lambda: vehicle._link.loop_ran_wall is not None and vehicle._clock.settled,
                               timeout_s=PATIENCE_S, what="the link's clock to settle")
             # The stall: this thread (the event loop's) blocks, reading nothing, until by the old rule the link
             # would be lost (more than 5 vehicle s flown and LINK_LOST_MIN_WALL_S passed since the last HEARTBEAT).
             stalled_at_s = served.simulator.time_s
             until(lambda: served.simulator.time_s - stalled_at_s > vehicle.link_timeout_s + 1.0
-                  and time.monotonic() - vehicle._last_heartbeat_wall > LINK_LOST_MIN_WALL_S + 0.2,
+                  and time.monotonic() - vehicle._link.last_heartbeat_wall > LINK_LOST_MIN_WALL_S + 0.2,
                   timeout_s=PATIENCE_S, what="the vehicle to fly on through the stall")
             vehicle._check_link("telemetry")
             said.append("stalled: no verdict")
-            await until_async(lambda: time.monotonic() - vehicle._last_heartbeat_wall < 1.0, timeout_s=PATIENCE_S,
+            await until_async(lambda: time.monotonic() - vehicle._link.last_heartbeat_wall < 1.0, timeout_s=PATIENCE_S,
                               what="the HEARTBEATs of the stall to be read")
             vehicle._check_link("telemetry")
             said.append("read: linked")

@@ -33,6 +33,7 @@ from typing import Any, TypeVar
 from ..mavlink.dialect import xml_text
 from ..errors import CommandDenied, LinkLost, VehicleError, WaitTimeout
 from .commanded_state import Commanded, heartbeat_armed, heartbeat_mode
+from .link_watch import LinkWatch
 from .lockstep_clock import EXCHANGE_STEP_S, LockstepClock
 from .mavsdk_support import (DaemonCallExecutor, mavsdk_connection_url, quiet_mavsdk_logs,
                              set_command_resend_wall_s)
@@ -76,20 +77,6 @@ COMPANION_HEARTBEAT = {"type": 18, "autopilot": 8, "base_mode": 0, "custom_mode"
 # What the vehicle reads of what the autopilot sends: its streams and the answers to requests (a lock-step clock
 # counts these before a wake).
 READ_MESSAGES = frozenset(STREAMS_HZ) | {"COMMAND_ACK", "PARAM_VALUE", "STATUSTEXT"}
-# A vehicle that sends nothing at all (no stamped message either) has its silence reckoned from wall time,
-# so at 8x the 5 vehicle s of link_timeout_s would be 0.6 wall s, and a stall of either process (a loaded
-# machine, a garbage collection) would read as a lost link. Such a link is lost only after this much wall time
-# of quiet too: MAVSDK's own heartbeat timeout (SystemImpl::_HEARTBEAT_TIMEOUT_S), after which it reports the
-# system disconnected. Up to 5/3x the 5 vehicle s alone decide; a SITL that has stopped is found within 3 wall s.
-LINK_LOST_MIN_WALL_S = 3.0
-# Stamped messages come at 10 Hz (STREAMS_HZ): stamps read further apart than this mean the messages between
-# were lost (a starved process's UDP receive buffer overflows, heartbeats and all), and that vehicle time is
-# not time the vehicle was heard talking without heartbeats.
-HEARD_STEP_MAX_S = 1.0
-# preland's own event loop has stalled (a loaded machine, a long synchronous step) when its tick has not run for
-# this long: what the vehicle sent meanwhile waits unread, so the silence seen is not yet the vehicle's.
-LOOP_STALL_WALL_S = 0.5
-_LOOP_TICK_WALL_S = 0.1
 # Ground truth for the simulated sensors: each of their readings needs a SIM_STATE of its own, and the
 # IR-LOCK reads at 50 Hz.
 SIM_STATE_HZ = 50
@@ -149,11 +136,8 @@ class MavlinkVehicle:
         self._sim_state_time_s = 0.0
         self._sim_state_fresh = False
         self._status_texts: list[str] = []
-        self._last_heartbeat_wall: float | None = None
         self._heartbeat_stamp_s: float | None = None  # the newest vehicle time read when a heartbeat came
-        self._stamp_high_s: float | None = None  # the newest stamp read (s), for `_heard_stamp`
-        self._talked_s = 0.0  # vehicle s heard in stamped messages since the last heartbeat (HEARD_STEP_MAX_S)
-        self._last_message_wall: float | None = None  # any message of the vehicle's
+        self._link = LinkWatch()  # what was heard, and when: whether a free-running vehicle's link is lost
         self._sdk = None
         self._direct = None
         self._sender = None  # the synchronous MavlinkDirect under `_direct`
@@ -162,8 +146,6 @@ class MavlinkVehicle:
         self._param_values: dict[str, tuple[float, int, int]] = {}  # name -> (value, type, receipt number)
         self._param_receipts = 0
         self._tasks: list[asyncio.Task] = []
-        self._loop_ran_wall: float | None = None  # when the event loop last ran `_tick` (monotonic wall s)
-        self._resumed_wall = 0.0  # when `_tick` last ran after a stall of this process (monotonic wall s)
         self._closed = False
         self._connected = False
         self.system_id = 1
@@ -224,7 +206,7 @@ class MavlinkVehicle:
         # LANDING_TARGET and a PRELAND_PACE grant every few vehicle ms). The ctypes call releases the GIL.
         self._sender = self._direct._plugin
         self._background(self._listen(), "listen")
-        self._background(self._tick(), "tick")
+        self._background(self._link.tick(), "tick")
         deadline = time.monotonic() + self.connect_timeout_s
         # No request before MAVSDK's message stream delivers: an answer sent before the subscription is live
         # (later than the call, on a loaded machine) is returned to its call but never read on the stream,
@@ -363,11 +345,9 @@ class MavlinkVehicle:
             if message.system_id != self.system_id:
                 continue
             self._messages[name] = fields
-            self._last_message_wall = time.monotonic()
+            self._link.heard(heartbeat=name == "HEARTBEAT")
             if name == "HEARTBEAT":
-                self._last_heartbeat_wall = self._last_message_wall
                 self._heartbeat_stamp_s = self._clock.newest_s
-                self._talked_s = 0.0
                 self._last_heartbeat_vehicle_s = self.clock.now_s()
                 self._heartbeats_read += 1
                 self._heartbeat_confirms(fields)
@@ -399,29 +379,8 @@ class MavlinkVehicle:
                 self._sim_state_time_s = self._clock.now_s()
             if "time_boot_ms" in fields:
                 stamp_s = fields["time_boot_ms"] / 1000.0
-                self._heard_stamp(stamp_s)
+                self._link.heard_stamp(stamp_s)
                 self._clock.observe(stamp_s)
-
-    def _heard_stamp(self, stamp_s: float) -> None:
-        """Count the vehicle seconds a stamped message moves the stream read on by, when heard step by step."""
-        high_s = self._stamp_high_s
-        if high_s is not None and high_s < stamp_s <= high_s + HEARD_STEP_MAX_S:
-            self._talked_s += stamp_s - high_s
-        if high_s is None or stamp_s > high_s or stamp_s < high_s - 1.0:  # newer, or the autopilot rebooted
-            self._stamp_high_s = stamp_s
-
-    async def _tick(self) -> None:
-        """Note, every _LOOP_TICK_WALL_S, that this process's event loop runs (see `_check_link`)."""
-        while True:
-            self._loop_ran(time.monotonic())
-            await asyncio.sleep(_LOOP_TICK_WALL_S)
-
-    def _loop_ran(self, now_wall_s: float) -> None:
-        # After a stall the tick may run before a check that was due in it, and before the messages sent
-        # meanwhile are read: quiet is reckoned from the stall's end, not from before it.
-        if self._loop_ran_wall is not None and now_wall_s - self._loop_ran_wall > LOOP_STALL_WALL_S:
-            self._resumed_wall = now_wall_s
-        self._loop_ran_wall = now_wall_s
 
     def _heartbeat_confirms(self, fields: dict[str, Any]) -> None:
         """Note a HEARTBEAT that reports a commanded state, so a later one reporting another counts at once."""
@@ -444,25 +403,8 @@ class MavlinkVehicle:
             if silent_vehicle_s > self.link_timeout_s:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s in "
                                                           "lock-step")
-        elif self._last_heartbeat_wall is not None:
-            # A vehicle that still sends its stamped messages counts the silence itself: vehicle seconds by
-            # its own stamps, whatever the wall time, but only those heard (HEARD_STEP_MAX_S). One that sends
-            # nothing is judged by wall time, and only after LINK_LOST_MIN_WALL_S of total quiet (a stall of
-            # either process is no lost link).
-            talked_s = self._talked_s
-            if talked_s > self.link_timeout_s:
-                raise LinkLost(operation=operation, reason=f"no heartbeat for {talked_s:.1f} vehicle s by the "
-                                                          "stamps of its other messages")
-            now_wall_s = time.monotonic()
-            if self._loop_ran_wall is not None and now_wall_s - self._loop_ran_wall > LOOP_STALL_WALL_S:
-                return  # this process stalled: the vehicle's messages of meanwhile are not read yet
-            silent_vehicle_s = (now_wall_s - self._last_heartbeat_wall) * self._clock.rate
-            quiet_wall_s = now_wall_s - max(self._last_heartbeat_wall, self._last_message_wall or 0.0,
-                                            self._resumed_wall)
-            if silent_vehicle_s > self.link_timeout_s and quiet_wall_s > LINK_LOST_MIN_WALL_S:
-                raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s at "
-                                                          f"{self._clock.rate:.2g}x, nothing heard for "
-                                                          f"{quiet_wall_s:.1f} wall s")
+        else:
+            self._link.check(operation, link_timeout_s=self.link_timeout_s, rate=self._clock.rate)
 
     async def close(self) -> None:
         calls_waited = False
