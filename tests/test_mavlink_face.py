@@ -341,3 +341,42 @@ def test_what_a_step_writes_leaves_in_datagrams_of_whole_frames_below_the_mtu():
     assert max(sizes) <= mavlink_face.MAX_DATAGRAM_BYTES
     assert max(sizes) > mavlink_face.MAX_DATAGRAM_BYTES - 280, "the list burst filled datagrams to the bound"
     assert min(frames_per_datagram) >= 1 and max(frames_per_datagram) > 3
+
+
+def test_a_listening_port_sends_nothing_to_a_peer_gone_silent_until_it_speaks_again():
+    """A companion's port, once closed, may be handed to another program, which would read this vehicle as its
+    own: a peer that said nothing for PEER_SILENT_WALL_S gets no more streams, and gets them again when it
+    speaks."""
+    port = free_port()
+    simulator = Simulator(seed=3, environment=EnvironmentSpec(wind=WindSpec(speed_m_s=0.0, turbulence_w20_m_s=0.0)))
+    face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=1.0), listen=f"udp:127.0.0.1:{port}")
+    client = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega")
+    attitudes_ms: list[int] = []
+
+    def step_until_an_attitude_after(time_ms: int, what: str) -> None:
+        deadline = time.monotonic() + 30.0
+        while not attitudes_ms or attitudes_ms[-1] <= time_ms:
+            assert time.monotonic() < deadline, f"waited 30 s for {what}"
+            face._step_and_serve()
+            while (message := client.recv_match(type="ATTITUDE", blocking=False)) is not None:
+                attitudes_ms.append(message.time_boot_ms)
+
+    try:
+        client.mav.command_long_send(1, 1, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                     mavlink2.MAVLINK_MSG_ID_ATTITUDE, 1e5, 0, 0, 0, 0, 0)
+        step_until_an_attitude_after(-1, "the face to stream ATTITUDE to the client that asked")
+        # The peer last spoke longer ago than the bound: a second of steps sends it nothing.
+        face.channels[0].heard_wall_s -= mavlink_face.PEER_SILENT_WALL_S + 1.0
+        silent_from_ms = face.time_boot_ms()
+        for _ in range(round(1.0 / simulator.dt_s)):
+            face._step_and_serve()
+        silent_to_ms = face.time_boot_ms()
+        client.mav.heartbeat_send(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        step_until_an_attitude_after(silent_to_ms, "the face to stream again to the client that spoke")
+    finally:
+        face._close()
+        client.close()
+    assert silent_to_ms - silent_from_ms >= 990
+    # Datagrams from one sender arrive in order: any sent in the silent second would be read before the later ones.
+    assert [t for t in attitudes_ms if silent_from_ms < t <= silent_to_ms] == []
+    assert attitudes_ms[-1] > silent_to_ms

@@ -112,3 +112,63 @@ def test_a_sitl_that_exits_during_a_trial_is_told_with_its_last_line_on_stderr(t
             return sitl.exit_description()
 
     assert asyncio.run(main()) == "exited with code 3 (its last line on stderr: bind failed: Address in use)"
+
+
+def test_a_stopping_sitl_keeps_its_companions_port_from_other_trials(tmp_path, monkeypatch):
+    """SITL sends to the companion's port until it has exited, and the companion lets the port go first: the
+    port stays held meanwhile, so no other trial is handed it and reads this vehicle's messages as its own."""
+    import asyncio
+    import errno
+    import socket
+
+    from preland_app.runtime import sitl as sitl_runtime
+    from preland_app.runtime.sitl import SitlInstance
+
+    told_to_stop, let_exit = tmp_path / "told-to-stop", tmp_path / "let-exit"
+    binary = tmp_path / "arducopter"
+    # Sends to its --serial0 udpclient address until the test lets it exit, after its SIGTERM too (as a SITL
+    # does while it stops).
+    binary.write_text(f"""#!{sys.executable}
+import pathlib, signal, socket, sys, time
+if "--help" in sys.argv:
+    print("--serial0")
+    sys.exit(0)
+host, port = sys.argv[sys.argv.index("--serial0") + 1].split(":")[1:]
+signal.signal(signal.SIGTERM, lambda *_: pathlib.Path({str(told_to_stop)!r}).touch())
+out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+while not pathlib.Path({str(let_exit)!r}).exists():
+    try:
+        out.sendto(b"vehicle", (host, int(port)))
+    except OSError:
+        pass
+    time.sleep(0.01)
+""")
+    binary.chmod(0o755)
+    monkeypatch.setattr(sitl_runtime, "STOP_GRACE_S", 60.0)  # the stand-in exits when the check is done
+
+    def bind_while_stopping(port: int) -> str:
+        try:
+            until(told_to_stop.exists, timeout_s=60, what="the stand-in SITL's SIGTERM")
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
+                other.bind(("127.0.0.1", port))
+            return "bound"
+        except OSError as error:
+            return errno.errorcode[error.errno]
+        finally:
+            let_exit.touch()
+
+    async def main() -> tuple[int, str, str | None]:
+        async with SitlInstance(options=SitlOptions(binary=binary, speedup=1.0), params={}) as sitl:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as companion:
+                companion.bind(("127.0.0.1", sitl.port))
+                companion.settimeout(60)
+                assert companion.recv(64) == b"vehicle"
+            # The companion has closed: another trial binding the port now would read this SITL.
+            other = asyncio.get_running_loop().run_in_executor(None, bind_while_stopping, sitl.port)
+        return sitl.port, await other, sitl.exit_description()
+
+    port, while_stopping, ended = asyncio.run(main())
+    assert while_stopping == "EADDRINUSE"
+    assert ended is not None  # stopped before the port was let go
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as after:
+        after.bind(("127.0.0.1", port))

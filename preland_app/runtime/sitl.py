@@ -386,6 +386,18 @@ def _free_udp_port() -> int:
         return probe.getsockname()[1]
 
 
+def _hold_udp_port(port: int) -> socket.socket | None:
+    """Bind 127.0.0.1:`port` (no SO_REUSEADDR, so nothing can share it) and return the socket, or None when
+    the port is still taken (the companion's MAVLink has not let it go)."""
+    sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sink.bind(("127.0.0.1", port))
+    except OSError:
+        sink.close()
+        return None
+    return sink
+
+
 def _die_with_parent() -> None:
     os.setsid()  # a process group of its own, so the whole group can be stopped
     try:
@@ -532,6 +544,17 @@ class SitlInstance:
             await asyncio.sleep(0.1)
 
     def stop(self) -> None:
+        # SITL (or the relay) sends to the companion's port until it has stopped, and the companion has let the
+        # port go: held meanwhile, it cannot be handed to another trial, whose companion would read this
+        # vehicle's messages as its own (every vehicle is system 1).
+        sink = _hold_udp_port(self.port)
+        try:
+            self._stop_process()
+        finally:
+            if sink is not None:
+                sink.close()
+
+    def _stop_process(self) -> None:
         process = self.process
         if process is not None and process.poll() is None:
             if self.bridge is not None:

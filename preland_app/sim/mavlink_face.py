@@ -7,7 +7,9 @@ channel, as an ArduPilot serial port is: it answers whoever talks to it there
 and keeps its own stream rates, so preland can fly on one port while a ground
 station watches on another. Like ArduPilot it streams nothing but HEARTBEAT
 until asked (MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM) on that
-channel; STATUSTEXT and changed parameters go to every channel. It handles COMMAND_LONG
+channel; STATUSTEXT and changed parameters go to every channel. Unlike ArduPilot, a
+listening port stops sending to a peer silent for PEER_SILENT_WALL_S (its port may
+have been handed to another program) until it speaks again. It handles COMMAND_LONG
 (arm/disarm, take-off, land, RTL, set mode, message intervals, message
 requests), SET_MODE, SET_POSITION_TARGET_LOCAL_NED (positions and velocities,
 local and body frames), SET_POSITION_TARGET_GLOBAL_INT, LANDING_TARGET, the
@@ -72,6 +74,9 @@ os.environ.setdefault("MAVLINK20", "1")
 # Paced: the companion port has said nothing (MAVSDK alone sends a HEARTBEAT a second) for this long: it
 # has gone, and the face runs free again.
 PACE_RELEASE_WALL_S = 10.0
+# A peer a listening port learned (it spoke first) that has said nothing for this long gets nothing more until
+# it speaks again: its port, once closed, may be handed to another program, which would read this vehicle.
+PEER_SILENT_WALL_S = 5.0
 # Paced and holding: the face wakes when a datagram comes, or after this many wall seconds to look at the
 # time (a HEARTBEAT each HOLD_HEARTBEAT_WALL_S, the release bound).
 HOLD_WAIT_WALL_S = 0.1
@@ -191,7 +196,13 @@ class _Channel:
         self.intervals_s: dict[int, float] = {k: 1.0 / v for k, v in _STREAMS_DEFAULT_HZ.items()}
         self.next_send_s: dict[int, float] = {}
         # Sending first (udpclient) needs no peer to have spoken; listening waits for one.
-        self.peer_seen = address.startswith("udpout")
+        self.sends_first = address.startswith("udpout")
+        self.peer_seen = self.sends_first
+        self.heard_wall_s = 0.0  # when its peer last spoke (monotonic wall s)
+
+    def forget_silent_peer(self, now_wall_s: float) -> None:
+        if self.peer_seen and not self.sends_first and now_wall_s - self.heard_wall_s > PEER_SILENT_WALL_S:
+            self.peer_seen = False
 
 
 class MavlinkFace(GroundStationServices):
@@ -225,12 +236,11 @@ class MavlinkFace(GroundStationServices):
         self._param_names = ARDUPILOT_PARAM_NAMES
         self._status_sent = 0
         # Pacing (PRELAND_PACE): the time granted (s; None: free), the channel that grants it, whether the
-        # face has said it holds there, and when that channel was last heard (monotonic wall s).
+        # face has said it holds there.
         self.paced = paced
         self.pace_until_s: float | None = simulator.time_s if paced else None
         self._pace_channel: _Channel | None = None
         self._pace_answered = True
-        self._pace_heard_wall_s = 0.0
         self._held_heartbeat_wall_s = 0.0
         self.pace_holds = 0  # how many times it held for a companion
 
@@ -294,9 +304,11 @@ class MavlinkFace(GroundStationServices):
             channel.datagrams.flush()
 
     def _receive_everywhere(self) -> None:
+        now_wall_s = time.monotonic()
         for channel in self.channels:
             self._channel = channel
             self._receive_all()
+            channel.forget_silent_peer(now_wall_s)
 
     async def _hold(self) -> None:
         """At the granted time: say so once (SIM_STATE, then PRELAND_PACE), then serve until a later grant."""
@@ -316,7 +328,7 @@ class MavlinkFace(GroundStationServices):
                     self.simulator.time_s < self.pace_until_s - 1e-9:
                 return  # a grant (or a release) came: step, or answer it
             now_wall_s = time.monotonic()
-            if channel is not None and now_wall_s - self._pace_heard_wall_s > PACE_RELEASE_WALL_S:
+            if channel is not None and now_wall_s - channel.heard_wall_s > PACE_RELEASE_WALL_S:
                 self._release_pace()
                 self._say(f"pacing released: the companion said nothing for {PACE_RELEASE_WALL_S:g} s")
                 return
@@ -375,8 +387,7 @@ class MavlinkFace(GroundStationServices):
             if message is None:
                 return
             self._channel.peer_seen = True
-            if self._channel is self._pace_channel:
-                self._pace_heard_wall_s = time.monotonic()
+            self._channel.heard_wall_s = time.monotonic()
             if message.get_type() == _PACE_TYPE:
                 self._on_preland_pace(message)
                 continue
@@ -694,7 +705,6 @@ class MavlinkFace(GroundStationServices):
         self.pace_until_s = fields["time_boot_ms"] / 1000.0
         self._pace_channel = self._channel
         self._pace_answered = False
-        self._pace_heard_wall_s = time.monotonic()
 
     def _on_landing_target(self, message) -> None:
         now_s = self.simulator.time_s
