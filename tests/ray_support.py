@@ -18,7 +18,7 @@ from preland_app.runtime.sitl import SITL_ENV
 
 from .conftest import ROOT
 
-NODE_SITL = "/bin/false"  # the SITL binary the Ray node advertises: one that exits at once
+NODE_SITL = "/bin/false"  # the SITL binary the Ray node advertises: one that exits before its vehicle answers
 # The bound on a driver's waits is for one that hangs, not a speed target: a Ray driver on a loaded 2-core
 # machine takes minutes to start and run a few trials.
 DRIVER_HANG_S = 600.0

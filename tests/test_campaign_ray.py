@@ -104,7 +104,7 @@ def test_sitl_trials_need_sitl_nodes_and_use_their_binary_and_a_trial_must_fit_a
         assert run_campaign(campaign, store, executor="ray", runtime=SitlRuntime(options=SitlOptions(binary=None))) == (1, 1)
         (trial,) = store.trials("on_sitl")
     assert trial["source"] == "sitl" and trial["outcome"] == "error"
-    assert f"{NODE_SITL} exited at once" in trial["message"]
+    assert f"{NODE_SITL} exited with code 1 before its vehicle answered" in trial["message"]
     with ResultsStore(":memory:") as store, pytest.raises(ExecutorError, match="has 4 CPUs for one trial"):
         run_campaign(campaign, store, executor=create_executor("ray", ExecutorOptions(trial_cpus=4)))
     with ResultsStore(":memory:") as store, pytest.raises(ExecutorError, match="advertises the 'sitl_x86' resource"):

@@ -172,3 +172,19 @@ while not pathlib.Path({str(let_exit)!r}).exists():
     assert ended is not None  # stopped before the port was let go
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as after:
         after.bind(("127.0.0.1", port))
+
+
+def test_a_sitl_that_exits_before_its_vehicle_answers_is_told_the_same_however_soon_it_exits(tmp_path, thesis_mission):
+    """How soon a SITL that cannot start exits depends on the machine's load; the start check (0.2 s) or the
+    watch during the connection finds it, and either says the same: the binary, how it ended, before its
+    vehicle answered. This one exits after a second, after the start check."""
+    binary = tmp_path / "arducopter"
+    binary.write_text("#!/bin/sh\n[ \"$1\" = --help ] && exit 0\nsleep 1\necho 'no vehicle here' >&2\nexit 3\n")
+    binary.chmod(0o755)
+    from preland_app.runtime.sitl import SitlError
+
+    with pytest.raises(SitlError) as raised:
+        run_sitl_trial(TrialRequest(mission=thesis_mission, seed=1, land_mode="normal"),
+                       options=SitlOptions(binary=binary, speedup=1.0))
+    assert str(raised.value) == (f"{binary} exited with code 3 (its last line on stderr: no vehicle here) "
+                                 "before its vehicle answered")

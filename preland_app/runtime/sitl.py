@@ -496,11 +496,15 @@ class SitlInstance:
             self.stop()
             raise
         if self.process.poll() is not None:
-            tail = self._stderr_tail()
-            code = self.process.returncode
+            message = self._ended_before_answering()
             self._release()
-            raise SitlError(f"{self.options.binary} exited at once (code {code}) {tail}".strip())
+            raise SitlError(message)
         return self
+
+    def _ended_before_answering(self) -> str:
+        # Said the same whether the start check or the watch finds it: how soon a process that cannot start
+        # exits depends on the machine's load.
+        return f"{self.options.binary} {self.exit_description()} before its vehicle answered"
 
     def _stderr_tail(self) -> str:
         """The last line SITL wrote to its stderr ("" without one)."""
@@ -529,12 +533,15 @@ class SitlInstance:
         return f"exited with code {code}" + (f" (its last line on stderr: {tail})" if tail else "")
 
     async def watch(self, vehicle: MavlinkVehicle) -> None:
-        """Raise SitlExited as soon as the SITL process ends (its trial cannot go on), and
+        """Raise SitlExited as soon as the SITL process ends (its trial cannot go on; SitlError before the
+        vehicle has answered, as a SITL that cannot start), and
         PhysicsBridgeFailed when the JSON bridge fails other than by its packet timeout (a bridge that
         timed out only stopped: SITL's exit or the lost link then ends the trial)."""
         while True:
             ended = self.exit_description()
             if ended is not None:
+                if not vehicle.connected:
+                    raise SitlError(self._ended_before_answering())
                 raise SitlExited(f"{self.options.binary.name} (SITL instance {self.instance}) {ended} "
                                  "during the trial")
             failure = self.bridge.error if self.bridge is not None else None
