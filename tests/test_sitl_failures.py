@@ -124,29 +124,26 @@ def test_a_stopping_sitl_keeps_its_companions_port_from_other_trials(tmp_path, m
     from preland_app.runtime import sitl as sitl_runtime
     from preland_app.runtime.sitl import SitlInstance
 
-    told_to_stop, let_exit = tmp_path / "told-to-stop", tmp_path / "let-exit"
+    told_to_stop = tmp_path / "told-to-stop"
     binary = tmp_path / "arducopter"
-    # Sends to its --serial0 udpclient address until the test lets it exit, after its SIGTERM too (as a SITL
-    # does while it stops).
+    # Sends to its --serial0 udpclient address once, then stays until a datagram tells it to exit, after its
+    # SIGTERM too (as a SITL goes on running, and sending, while it stops).
     binary.write_text(f"""#!{sys.executable}
-import pathlib, signal, socket, sys, time
+import pathlib, signal, socket, sys
 if "--help" in sys.argv:
     print("--serial0")
     sys.exit(0)
 host, port = sys.argv[sys.argv.index("--serial0") + 1].split(":")[1:]
 signal.signal(signal.SIGTERM, lambda *_: pathlib.Path({str(told_to_stop)!r}).touch())
 out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-while not pathlib.Path({str(let_exit)!r}).exists():
-    try:
-        out.sendto(b"vehicle", (host, int(port)))
-    except OSError:
-        pass
-    time.sleep(0.01)
+out.settimeout(60)
+out.sendto(b"vehicle", (host, int(port)))
+out.recv(16)
 """)
     binary.chmod(0o755)
     monkeypatch.setattr(sitl_runtime, "STOP_GRACE_S", 60.0)  # the stand-in exits when the check is done
 
-    def bind_while_stopping(port: int) -> str:
+    def bind_while_stopping(port: int, stand_in: tuple[str, int]) -> str:
         try:
             until(told_to_stop.exists, timeout_s=60, what="the stand-in SITL's SIGTERM")
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
@@ -155,16 +152,23 @@ while not pathlib.Path({str(let_exit)!r}).exists():
         except OSError as error:
             return errno.errorcode[error.errno]
         finally:
-            let_exit.touch()
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as teller:
+                teller.sendto(b"exit", stand_in)
 
     async def main() -> tuple[int, str, str | None]:
-        async with SitlInstance(options=SitlOptions(binary=binary, speedup=1.0), params={}) as sitl:
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as companion:
-                companion.bind(("127.0.0.1", sitl.port))
-                companion.settimeout(60)
-                assert companion.recv(64) == b"vehicle"
+        sitl = SitlInstance(options=SitlOptions(binary=binary, speedup=1.0), params={})
+        # The companion listens before SITL starts, as MAVSDK's port takes SITL's first datagram.
+        companion = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        companion.bind(("127.0.0.1", sitl.port))
+        companion.settimeout(60)
+        async with sitl:
+            try:
+                datagram, stand_in = companion.recvfrom(64)
+            finally:
+                companion.close()
+            assert datagram == b"vehicle"
             # The companion has closed: another trial binding the port now would read this SITL.
-            other = asyncio.get_running_loop().run_in_executor(None, bind_while_stopping, sitl.port)
+            other = asyncio.get_running_loop().run_in_executor(None, bind_while_stopping, sitl.port, stand_in)
         return sitl.port, await other, sitl.exit_description()
 
     port, while_stopping, ended = asyncio.run(main())
@@ -177,9 +181,30 @@ while not pathlib.Path({str(let_exit)!r}).exists():
 def test_a_sitl_that_exits_before_its_vehicle_answers_is_told_the_same_however_soon_it_exits(tmp_path, thesis_mission):
     """How soon a SITL that cannot start exits depends on the machine's load; the start check (0.2 s) or the
     watch during the connection finds it, and either says the same: the binary, how it ended, before its
-    vehicle answered. This one exits after a second, after the start check."""
+    vehicle answered. This one exits once the companion's MAVLink answers it, so after the start check: it
+    says it is a ground station (not an autopilot) until MAVSDK's heartbeat comes back."""
     binary = tmp_path / "arducopter"
-    binary.write_text("#!/bin/sh\n[ \"$1\" = --help ] && exit 0\nsleep 1\necho 'no vehicle here' >&2\nexit 3\n")
+    binary.write_text(f"""#!{sys.executable}
+import socket, sys
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+if "--help" in sys.argv:
+    print("--serial0")
+    sys.exit(0)
+host, port = sys.argv[sys.argv.index("--serial0") + 1].split(":")[1:]
+mav = mavlink2.MAVLink(None, srcSystem=200, srcComponent=1)
+heartbeat = mav.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav)
+out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+out.settimeout(0.2)
+for _ in range(300):  # 60 s at most
+    out.sendto(heartbeat, (host, int(port)))
+    try:
+        out.recv(2048)
+        break
+    except socket.timeout:
+        pass
+sys.stderr.write("no vehicle here\\n")
+sys.exit(3)
+""")
     binary.chmod(0o755)
     from preland_app.runtime.sitl import SitlError
 
