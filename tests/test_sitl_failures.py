@@ -114,6 +114,21 @@ def test_a_sitl_that_exits_during_a_trial_is_told_with_its_last_line_on_stderr(t
     assert asyncio.run(main()) == "exited with code 3 (its last line on stderr: bind failed: Address in use)"
 
 
+def _python_stand_in(folder: Path, body: str) -> Path:
+    """An executable `arducopter` in `folder`: answers --help as a 4.5+ SITL, else runs `body` with `host` and
+    `port` (its --serial0 udpclient address) and `socket`, `sys` imported."""
+    binary = folder / "arducopter"
+    binary.write_text(f"""#!{sys.executable}
+import socket, sys
+if "--help" in sys.argv:
+    print("--serial0")
+    sys.exit(0)
+host, port = sys.argv[sys.argv.index("--serial0") + 1].split(":")[1:]
+{body}""")
+    binary.chmod(0o755)
+    return binary
+
+
 def test_a_stopping_sitl_keeps_its_companions_port_from_other_trials(tmp_path, monkeypatch):
     """SITL sends to the companion's port until it has exited, and the companion lets the port go first: the
     port stays held meanwhile, so no other trial is handed it and reads this vehicle's messages as its own."""
@@ -125,22 +140,15 @@ def test_a_stopping_sitl_keeps_its_companions_port_from_other_trials(tmp_path, m
     from preland_app.runtime.sitl import SitlInstance
 
     told_to_stop = tmp_path / "told-to-stop"
-    binary = tmp_path / "arducopter"
     # Sends to its --serial0 udpclient address once, then stays until a datagram tells it to exit, after its
     # SIGTERM too (as a SITL goes on running, and sending, while it stops).
-    binary.write_text(f"""#!{sys.executable}
-import pathlib, signal, socket, sys
-if "--help" in sys.argv:
-    print("--serial0")
-    sys.exit(0)
-host, port = sys.argv[sys.argv.index("--serial0") + 1].split(":")[1:]
+    binary = _python_stand_in(tmp_path, f"""import pathlib, signal
 signal.signal(signal.SIGTERM, lambda *_: pathlib.Path({str(told_to_stop)!r}).touch())
 out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 out.settimeout(60)
 out.sendto(b"vehicle", (host, int(port)))
 out.recv(16)
 """)
-    binary.chmod(0o755)
     monkeypatch.setattr(sitl_runtime, "STOP_GRACE_S", 60.0)  # the stand-in exits when the check is done
 
     def bind_while_stopping(port: int, stand_in: tuple[str, int]) -> str:
@@ -183,14 +191,7 @@ def test_a_sitl_that_exits_before_its_vehicle_answers_is_told_the_same_however_s
     watch during the connection finds it, and either says the same: the binary, how it ended, before its
     vehicle answered. This one exits once the companion's MAVLink answers it, so after the start check: it
     says it is a ground station (not an autopilot) until MAVSDK's heartbeat comes back."""
-    binary = tmp_path / "arducopter"
-    binary.write_text(f"""#!{sys.executable}
-import socket, sys
-from pymavlink.dialects.v20 import ardupilotmega as mavlink2
-if "--help" in sys.argv:
-    print("--serial0")
-    sys.exit(0)
-host, port = sys.argv[sys.argv.index("--serial0") + 1].split(":")[1:]
+    binary = _python_stand_in(tmp_path, """from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 mav = mavlink2.MAVLink(None, srcSystem=200, srcComponent=1)
 heartbeat = mav.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav)
 out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -205,7 +206,6 @@ for _ in range(300):  # 60 s at most
 sys.stderr.write("no vehicle here\\n")
 sys.exit(3)
 """)
-    binary.chmod(0o755)
     from preland_app.runtime.sitl import SitlError
 
     with pytest.raises(SitlError) as raised:
