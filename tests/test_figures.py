@@ -93,5 +93,6 @@ def test_the_trajectory_figure_shows_the_chosen_trial(tmp_path):
     assert "last 2 m of the descent" in path  # the path (about 2.4 m) is long beside a 5 cm error
     result = report(db, tmp_path / "svg", "--campaign", "thesis_table3", "--trial", "IRLock / none")
     assert result.exit_code == 2 and "SCENARIO:INDEX" in result.stderr
-    result = report(db, tmp_path / "svg", "--campaign", "thesis_table3", "--trial", "IRLock / none:7")
+    result = report(db, tmp_path / "none", "--campaign", "thesis_table3", "--trial", "IRLock / none:7")
     assert result.exit_code == 2 and "no trial 7" in result.stderr
+    assert not list((tmp_path / "none").glob("*.png"))  # a trial that is not there is found before any drawing

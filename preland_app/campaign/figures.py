@@ -244,9 +244,9 @@ def write_figures(store: ResultsStore, campaign: str, summaries: list[ScenarioSu
     `dpi` (default 300). `trial` = (scenario, index) chooses the trajectory figure's trial."""
     suffix = "." + figure_format
     dpi = dpi if dpi is not None else DEFAULT_PNG_DPI
+    chosen = choose_trial(store, campaign, summaries, trial)  # first: a trial that is not there draws nothing
     figures = [landing_error_boxplot(campaign, summaries, out_dir / f"{campaign}_errors{suffix}", dpi=dpi),
                landing_positions_scatter(campaign, summaries, out_dir / f"{campaign}_positions{suffix}", dpi=dpi)]
-    chosen = choose_trial(store, campaign, summaries, trial)
     if chosen is not None:
         path = trajectory_figure(store, chosen, out_dir / f"{campaign}_trajectory{suffix}", dpi=dpi)
         if path is not None:
