@@ -1,12 +1,15 @@
 """Campaigns: spec validation, the store, workers, kill and resume, failing trials, reports."""
 
 import os
+import shutil
 import signal
 import sqlite3
 import subprocess
 import sys
 import time
+from contextlib import closing
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 from typer.testing import CliRunner
@@ -47,6 +50,34 @@ def comparable(store: ResultsStore, campaign: str) -> list[tuple]:
     return [tuple(str(t[c]) for c in COMPARED) for t in store.trials(campaign)]
 
 
+class QuickRun(NamedTuple):
+    db: Path
+    ran: tuple[int, int]
+    trials: list[tuple]
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory) -> QuickRun:
+    """QUICK run once with one worker: the tests that start from its stored trials share it (each test that
+    writes to a store takes a copy, quick_store) instead of flying the same six trials again."""
+    folder = tmp_path_factory.mktemp("quick")
+    with ResultsStore(folder / "quick.db") as store:
+        ran = run_campaign(load_campaign(write_campaign(folder, QUICK)), store, workers=1)
+        trials = comparable(store, "quick")
+    return QuickRun(folder / "quick.db", ran, trials)
+
+
+def quick_store(tmp_path: Path, run: QuickRun, name: str = "r.db") -> tuple[Path, Path]:
+    """QUICK's campaign file in tmp_path and a copy of the shared store: what running it there would have left
+    (the store names the campaign file it ran from, so the copy names this one)."""
+    path = write_campaign(tmp_path, QUICK)
+    db = tmp_path / name
+    shutil.copyfile(run.db, db)  # one file: the store's WAL is folded in when it closes
+    with closing(sqlite3.connect(db)) as connection, connection:
+        connection.execute("UPDATE campaigns SET source_path = ?", (str(path.resolve()),))
+    return path, db
+
+
 def test_store_round_trip_in_memory():
     store = ResultsStore(":memory:")
     record = TrialRecord(campaign="c", scenario="s", scenario_index=0, trial_index=3, seed=11,
@@ -71,16 +102,14 @@ def test_seeds_come_from_the_trial_identity():
     assert derive_seed(7, "gps", 0) != derive_seed(8, "gps", 0) != derive_seed(7, "irlock", 0)
 
 
-def test_one_and_two_workers_give_identical_trials(tmp_path):
+def test_one_and_two_workers_give_identical_trials(tmp_path, quick_run):
     campaign = load_campaign(write_campaign(tmp_path, QUICK))
-    results = []
-    for workers in (1, 2):
-        with ResultsStore(tmp_path / f"w{workers}.db") as store:
-            ran, total = run_campaign(campaign, store, workers=workers)
-            assert (ran, total) == (6, 6)
-            results.append(comparable(store, "quick"))
-    assert results[0] == results[1]
-    assert {r[3] for r in results[0]} == {"landed"}
+    assert quick_run.ran == (6, 6)  # one worker: the shared run
+    with ResultsStore(tmp_path / "w2.db") as store:
+        assert run_campaign(campaign, store, workers=2) == (6, 6)
+        two = comparable(store, "quick")
+    assert quick_run.trials == two
+    assert {r[3] for r in quick_run.trials} == {"landed"}
 
 
 def test_a_failing_trial_is_recorded_and_the_campaign_goes_on(tmp_path):
@@ -103,20 +132,19 @@ pad: {pad}
         assert "pad.yaml" in message
 
 
-def test_running_again_needs_resume_and_resume_repeats_nothing(tmp_path):
-    campaign = load_campaign(write_campaign(tmp_path, QUICK))
-    with ResultsStore(tmp_path / "r.db") as store:
-        run_campaign(campaign, store, workers=1)
+def test_running_again_needs_resume_and_resume_repeats_nothing(tmp_path, quick_run):
+    path, db = quick_store(tmp_path, quick_run)  # QUICK has run into it
+    campaign = load_campaign(path)
+    with ResultsStore(db) as store:
         with pytest.raises(Exception, match="--resume"):
             run_campaign(campaign, store, workers=1)
         assert run_campaign(campaign, store, workers=1, resume=True) == (0, 6)
         assert len(store.trials("quick")) == 6
 
 
-def test_resume_refuses_a_changed_scenario(tmp_path):
-    path = write_campaign(tmp_path, QUICK)
-    with ResultsStore(tmp_path / "r.db") as store:
-        run_campaign(load_campaign(path), store, workers=1)
+def test_resume_refuses_a_changed_scenario(tmp_path, quick_run):
+    path, db = quick_store(tmp_path, quick_run)  # QUICK has run into it
+    with ResultsStore(db) as store:
         path.write_text(path.read_text().replace("speed_m_s: 0.0", "speed_m_s: 2.0"))
         with pytest.raises(Exception, match="spec changed"):
             run_campaign(load_campaign(path), store, workers=1, resume=True)
@@ -230,10 +258,9 @@ def test_bad_campaign_files_give_one_clear_line(tmp_path, case):
     assert str(path) in message and field in message and problem in message
 
 
-def test_report_and_export(tmp_path):
-    campaign = load_campaign(write_campaign(tmp_path, QUICK))
-    with ResultsStore(tmp_path / "r.db") as store:
-        run_campaign(campaign, store, workers=1)
+def test_report_and_export(tmp_path, quick_run):
+    _, db = quick_store(tmp_path, quick_run)  # QUICK has run into it
+    with ResultsStore(db) as store:
         summaries = summarize(store, "quick")
         assert [s.label for s in summaries] == ["gps", "irlock"]
         assert summaries[0].reference.avg_error_cm == 67.15 and summaries[1].reference is None
@@ -261,11 +288,9 @@ def test_shipped_campaign_files_load(name):
     assert campaign.name == name and campaign.scenarios
 
 
-def test_field_trials_sit_beside_simulated_ones_in_the_report(tmp_path):
-    campaign = load_campaign(write_campaign(tmp_path, QUICK))
-    db = tmp_path / "r.db"
-    with ResultsStore(db) as store:
-        run_campaign(campaign, store, workers=1)
+def test_field_trials_sit_beside_simulated_ones_in_the_report(tmp_path, quick_run):
+    path, db = quick_store(tmp_path, quick_run)  # QUICK has run into it
+    campaign = load_campaign(path)
     runner = CliRunner()
     for error, x, y in ((12.5, 10.0, -7.5), (30.0, -20.0, 22.4)):
         result = runner.invoke(app, ["trial", "record", str(db), "quick", "gps",

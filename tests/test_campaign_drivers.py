@@ -22,7 +22,8 @@ from preland_app.campaign.trials import run_job
 from preland_app.cli import app
 
 from .conftest import ROOT
-from .test_campaign import QUICK, comparable, write_campaign
+from .test_campaign import (QUICK, comparable, quick_run, quick_store,  # noqa: F401 (quick_run: a fixture)
+                            write_campaign)
 
 
 def _lease(store, **kwargs) -> DriverLease:
@@ -137,17 +138,17 @@ class ThreadExecutor(TrialExecutor):
         self.pool.shutdown(wait=True)
 
 
-def test_an_executor_registered_by_name_runs_the_same_campaign(tmp_path, monkeypatch):
+def test_an_executor_registered_by_name_runs_the_same_campaign(tmp_path, monkeypatch, quick_run):
     monkeypatch.setattr(registry, "_EXECUTORS", dict(registry._EXECUTORS))
     register_executor("threads", ThreadExecutor)
     assert executor_names() == ["local", "ray", "threads"]
     campaign = load_campaign(write_campaign(tmp_path, QUICK))
-    with ResultsStore(":memory:") as threads, ResultsStore(":memory:") as local:
+    with ResultsStore(":memory:") as threads:
         executor = create_executor("threads", ExecutorOptions(workers=1))
         assert run_campaign(campaign, threads, executor=executor) == (6, 6)
         assert executor.submitted == 6
-        assert run_campaign(campaign, local, workers=1) == (6, 6)
-        assert comparable(threads, "quick") == comparable(local, "quick")
+        assert quick_run.ran == (6, 6)  # the local executor, one worker
+        assert comparable(threads, "quick") == quick_run.trials
     with pytest.raises(ExecutorError, match=r"unknown executor 'dask' \(known: local, ray, threads\)"):
         create_executor("dask", ExecutorOptions())
 
@@ -202,10 +203,10 @@ def test_an_unreachable_ray_cluster_gives_one_line(tmp_path):
                                          "connection refused")
 
 
-def test_outcomes_only_keeps_the_same_outcomes_without_events_or_trajectories(tmp_path):
-    campaign = load_campaign(write_campaign(tmp_path, QUICK))
-    with ResultsStore(tmp_path / "full.db") as full, ResultsStore(tmp_path / "lean.db") as lean:
-        run_campaign(campaign, full, workers=1)
+def test_outcomes_only_keeps_the_same_outcomes_without_events_or_trajectories(tmp_path, quick_run):
+    path, full_db = quick_store(tmp_path, quick_run, "full.db")  # QUICK has run into it, in full
+    campaign = load_campaign(path)
+    with ResultsStore(full_db) as full, ResultsStore(tmp_path / "lean.db") as lean:
         run_campaign(campaign, lean, workers=1, outcomes_only=True)
         assert comparable(lean, "quick") == comparable(full, "quick")
         for store, events, trajectories in ((full, True, True), (lean, False, False)):
