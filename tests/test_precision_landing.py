@@ -1,5 +1,6 @@
 """Precision land modes end to end, and the onboard precision landing fed through the Vehicle protocol."""
 
+import functools
 import math
 from dataclasses import replace
 
@@ -17,10 +18,18 @@ from .conftest import ROOT
 from .test_sim_autopilot import CALM, airborne, fly
 
 
+@pytest.fixture(scope="module")
+def thesis_landing(thesis_mission):
+    """The thesis mission flown in a land mode from a seed, each flown once in this module: a trial is
+    deterministic, and the marker landing from seed 1 is one two tests read."""
+    return functools.cache(lambda mode, seed: run_trial(
+        TrialRequest(mission=thesis_mission, seed=seed, land_mode=mode, record_trajectory=False)))
+
+
 @pytest.mark.parametrize("mode", ["irlock", "marker", "fused"])
-def test_precision_modes_land_on_the_pad(thesis_mission, mode):
+def test_precision_modes_land_on_the_pad(thesis_landing, mode):
     for seed in (0, 1):
-        outcome = run_trial(TrialRequest(mission=thesis_mission, seed=seed, land_mode=mode, record_trajectory=False))
+        outcome = thesis_landing(mode, seed)
         assert outcome.outcome is Outcome.LANDED, outcome.message
         assert outcome.scoring_reference == "pad"
         assert outcome.landing_error_cm < 15.0
@@ -29,12 +38,12 @@ def test_precision_modes_land_on_the_pad(thesis_mission, mode):
     assert outcome.takeoff_altitude_rel_m == expected_altitude
 
 
-def test_the_missions_detector_parameters_reach_the_companions_detector(thesis_mission):
+def test_the_missions_detector_parameters_reach_the_companions_detector(thesis_mission, thesis_landing):
     # OpenCV's maxMarkerPerimeterRate 0.3: nothing over 192 px round (the 60 cm marker below about 6 m) is a
     # candidate, so the marker is lost over the middle of the descent until the 9 cm one comes into view.
     limited = replace(thesis_mission, sensors=replace(
         thesis_mission.sensors, marker=MarkerSensorSpec(detector={"maxMarkerPerimeterRate": 0.3})))
-    default = run_trial(TrialRequest(mission=thesis_mission, seed=1, land_mode="marker", record_trajectory=False))
+    default = thesis_landing("marker", 1)
     narrowed = run_trial(TrialRequest(mission=limited, seed=1, land_mode="marker", record_trajectory=False))
     assert default.details["landing_targets_sent"] > 250
     assert narrowed.details["landing_targets_sent"] < 0.8 * default.details["landing_targets_sent"]

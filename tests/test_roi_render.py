@@ -97,13 +97,27 @@ def test_a_frame_is_drawn_only_when_read():
     assert len(drawn) == 2
 
 
+class _KeepsWholeFrameSearch(MarkerDetector):
+    """Keeps the image and detections of the tracker's last whole-frame search (its `super().detect`)."""
+
+    last_search = None
+
+    def detect(self, image):
+        self.last_search = (image, super().detect(image))
+        return self.last_search[1]
+
+
+class _WholeFrameTracker(TrackingMarkerDetector, _KeepsWholeFrameSearch):
+    """The tracker, unchanged: the whole-frame search it falls back on is kept by the class between."""
+
+
 class _ComparingDetector:
     """The runtime's detector during a flight, checked frame by frame against the whole-frame paths: the
     same tracker on the whole drawn frame, and a plain MarkerDetector on the whole frame."""
 
     def __init__(self, *, pad, camera, parameters=None):
         self.window = TrackingMarkerDetector(pad=pad, camera=camera, parameters=parameters)
-        self.whole = TrackingMarkerDetector(pad=pad, camera=camera, parameters=parameters)
+        self.whole = _WholeFrameTracker(pad=pad, camera=camera, parameters=parameters)
         self.plain = MarkerDetector(pad=pad, camera=camera, parameters=parameters)
         self.pad, self.camera = pad, camera
         self.frames = self.windowed = 0
@@ -117,9 +131,15 @@ class _ComparingDetector:
         searched_window = self.window._window is not None
         found = self.window.detect_frame(frame)  # first: only the window is drawn
         whole_image = frame.image
+        self.whole.last_search = None
         reference = self.whole.detect_frame(Frame(whole_image, capture_time_s=frame.capture_time_s))
         self._compare(found, reference, self.id_mismatches, self.corner_errors_px)
-        plain = {d.marker_id: d.corners_px for d in self.plain.detect(whole_image)}
+        # When the tracker searched the whole frame, that search is the plain detector's own (the same
+        # MarkerDetector.detect, parameters and image): not run twice.
+        searched = self.whole.last_search
+        plain_found = searched[1] if searched is not None and searched[0] is whole_image else (
+            self.plain.detect(whole_image))
+        plain = {d.marker_id: d.corners_px for d in plain_found}
         self.plain_extra_ids += sum(d.marker_id not in plain for d in found)
         self.plain_missed_ids += len(set(plain) - {d.marker_id for d in found})
         self.plain_corner_errors_px.extend(float(np.abs(d.corners_px - plain[d.marker_id]).max())
