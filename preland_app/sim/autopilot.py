@@ -126,6 +126,13 @@ class Autopilot:
         self._climb_shaper: AltitudeShaper | None = None  # copter-4.6's take-off target
         self._now_s = 0.0
         self.last_climb_demand_m_s = 0.0
+        # What the control loop derives from the parameters, recomputed when the table changes
+        # (`_derive_from_params`).
+        self._params_version = -1
+        self._precland_enabled = False
+        self._angle_max_rad = 0.0
+        self._loiter_accel_m_s2 = 0.0
+        self._derive_from_params()
 
     # ------------------------------------------------------------------ helpers
 
@@ -287,7 +294,18 @@ class Autopilot:
         self._hold_here()
 
     def precland_enabled(self) -> bool:
-        return self.params.value("PLND_ENABLED") == 1 and self.params.value("PLND_TYPE") == PLND_TYPE_COMPANION
+        if self._params_version != self.params.version:
+            self._derive_from_params()
+        return self._precland_enabled
+
+    def _derive_from_params(self) -> None:
+        value = self.params.value
+        self._precland_enabled = value("PLND_ENABLED") == 1 and value("PLND_TYPE") == PLND_TYPE_COMPANION
+        self._angle_max_rad = math.radians(value("ANGLE_MAX") / 100.0)
+        # AC_Loiter's correction acceleration: LOIT_ACC_MAX, at most what ANGLE_MAX allows
+        # (AC_Loiter::sanity_check_params).
+        self._loiter_accel_m_s2 = min(self.params.m_s("LOIT_ACC_MAX"), GRAVITY_M_S2 * math.tan(self._angle_max_rad))
+        self._params_version = self.params.version
 
     def receive_landing_target(self, target: LandingTarget) -> None:
         """LANDING_TARGET from a companion: fused by the precision-landing estimator when PLND is enabled
@@ -312,15 +330,18 @@ class Autopilot:
     def step(self, *, dt_s: float, now_s: float, nav: NavEstimate, yaw_rad: float,
              touching_ground: bool, roll_rad: float = 0.0, pitch_rad: float = 0.0) -> ActuatorDemand:
         """Run one control cycle on the estimate; returns the actuator demand."""
-        # The gyro's rate (rad/s) from the attitude's change over the step: small angles, so Euler rates will do.
-        gyro_rad_s = math.sqrt((roll_rad - self.roll_rad) ** 2 + (pitch_rad - self.pitch_rad) ** 2
-                               + math.remainder(yaw_rad - self.yaw_rad, 2 * math.pi) ** 2) / dt_s if dt_s > 0 else 0.0
+        precland_enabled = self.precland_enabled()  # also brings what is derived from the parameters up to date
+        if precland_enabled:  # only precision landing reads the gyro
+            # The gyro's rate (rad/s) from the attitude's change over the step: small angles, so Euler rates will do.
+            yaw_change_rad = math.remainder(yaw_rad - self.yaw_rad, 2 * math.pi)
+            gyro_rad_s = math.sqrt((roll_rad - self.roll_rad) ** 2 + (pitch_rad - self.pitch_rad) ** 2
+                                   + yaw_change_rad ** 2) / dt_s if dt_s > 0 else 0.0
         self._now_s = now_s
         self.nav = nav
         self.yaw_rad = yaw_rad
         self.roll_rad = roll_rad
         self.pitch_rad = pitch_rad
-        if self.precland_enabled():
+        if precland_enabled:
             self.precland.predict(dt_s=dt_s, delta_velocity_ned_m_s=(nav.delta_velocity_north_m_s,
                                                                      nav.delta_velocity_east_m_s))
             self.precland.record_pose(now_s, north_m=nav.north_m, east_m=nav.east_m,
@@ -395,12 +416,6 @@ class Autopilot:
         else:
             self._land_detector_s = 0.0
 
-    def _loiter_accel_m_s2(self) -> float:
-        """AC_Loiter's correction acceleration: LOIT_ACC_MAX, at most what ANGLE_MAX allows
-        (AC_Loiter::sanity_check_params)."""
-        angle_max_rad = math.radians(self.params.value("ANGLE_MAX") / 100.0)
-        return min(self.params.m_s("LOIT_ACC_MAX"), GRAVITY_M_S2 * math.tan(angle_max_rad))
-
     def _fly_to(self, dt_s: float, nav: NavEstimate, north_m: float | None, east_m: float | None,
                 down_m: float | None, *, speed_max_m_s: float, climb_rate_m_s: float | None = None,
                 velocity_ff: tuple[float, float] = (0.0, 0.0),
@@ -410,13 +425,17 @@ class Autopilot:
         """One position-control step. `loiter`: the position controller as AC_Loiter sets it up (LOITER,
         POSHOLD, LAND): corrections at LOIT_ACC_MAX and at most LOITER_VEL_CORRECTION_MAX; otherwise as
         AC_WPNav does (WPNAV_ACCEL)."""
-        p = self.params
+        value, m_s = self.params.value, self.params.m_s
         if loiter:
-            accel_max_m_s2 = self._loiter_accel_m_s2()
-            speed_max_m_s = min(speed_max_m_s, LOITER_VEL_CORRECTION_MAX_M_S)
+            accel_max_m_s2 = self._loiter_accel_m_s2
+            if LOITER_VEL_CORRECTION_MAX_M_S < speed_max_m_s:  # min(speed_max_m_s, LOITER_VEL_CORRECTION_MAX_M_S)
+                speed_max_m_s = LOITER_VEL_CORRECTION_MAX_M_S
         else:
-            accel_max_m_s2 = p.m_s("WPNAV_ACCEL")
-        velocity_north, velocity_east = velocity_feedback or (nav.velocity_north_m_s, nav.velocity_east_m_s)
+            accel_max_m_s2 = m_s("WPNAV_ACCEL")
+        if velocity_feedback:
+            velocity_north, velocity_east = velocity_feedback
+        else:
+            velocity_north, velocity_east = nav.velocity_north_m_s, nav.velocity_east_m_s
         roll, pitch = self._xy.update(
             dt_s=dt_s,
             yaw_rad=self.yaw_rad,
@@ -431,25 +450,25 @@ class Autopilot:
             accel_ff_ne_m_s2=accel_ff,
             speed_max_m_s=speed_max_m_s,
             accel_max_m_s2=accel_max_m_s2,
-            pos_p=p.value("PSC_POSXY_P"),
-            vel_p=p.value("PSC_VELXY_P"),
-            vel_i=p.value("PSC_VELXY_I"),
-            vel_imax_m_s2=p.m_s("PSC_VELXY_IMAX"),
-            angle_max_rad=math.radians(p.value("ANGLE_MAX") / 100.0),
+            pos_p=value("PSC_POSXY_P"),
+            vel_p=value("PSC_VELXY_P"),
+            vel_i=value("PSC_VELXY_I"),
+            vel_imax_m_s2=m_s("PSC_VELXY_IMAX"),
+            angle_max_rad=self._angle_max_rad,
         )
-        accel_z = p.m_s("WPNAV_ACCEL_Z")
+        accel_z = m_s("WPNAV_ACCEL_Z")
         if climb_rate_m_s is None:
             climb_rate_m_s = self._z.climb_for_altitude(
                 target_alt_m=-(down_m if down_m is not None else nav.down_m),
                 est_alt_m=-nav.down_m,
-                pos_p=p.value("PSC_POSZ_P"),
+                pos_p=value("PSC_POSZ_P"),
                 accel_max_m_s2=accel_z,
-                speed_up_m_s=p.m_s("WPNAV_SPEED_UP"),
-                speed_down_m_s=p.m_s("WPNAV_SPEED_DN"),
+                speed_up_m_s=m_s("WPNAV_SPEED_UP"),
+                speed_down_m_s=m_s("WPNAV_SPEED_DN"),
             )
         climb = self._z.shape(dt_s=dt_s, climb_rate_m_s=climb_rate_m_s, accel_max_m_s2=accel_z)
         climb_accel = self._z.accel_for_climb(dt_s=dt_s, est_climb_rate_m_s=-nav.velocity_down_m_s,
-                                              vel_p=p.value("PSC_VELZ_P"))
+                                              vel_p=value("PSC_VELZ_P"))
         return ActuatorDemand(roll_rad=roll, pitch_rad=pitch, yaw_rad=self.yaw_target_rad,
                               climb_rate_m_s=climb, climb_accel_m_s2=climb_accel, motors_armed=True)
 

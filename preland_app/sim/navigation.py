@@ -98,6 +98,10 @@ class NavigationModel:
         self._baro_origin_m = self._baro_drift.value + self._baro_noise.value
         self._previous_velocity: tuple[float, float] | None = None
         self.elapsed_s = 0.0
+        # The error processes' steps, looked up once (called ~12 times a physics step).
+        self._gps_step = self._gps_error.step
+        self._baro_steps = self._baro_drift.step, self._baro_noise.step
+        self._attitude_steps = self._roll_error.step, self._pitch_error.step, self._heading_error.step
 
     @property
     def gps_drift_ne_m(self) -> tuple[float, float]:
@@ -112,29 +116,34 @@ class NavigationModel:
         """
         self.elapsed_s += dt_s
         spec = self.spec
-        error_north, error_east = self._gps_error.step(dt_s)
-        error_down = -(self._baro_drift.step(dt_s) + self._baro_noise.step(dt_s) - self._baro_origin_m)
+        error_north, error_east = self._gps_step(dt_s)
+        baro_drift_step, baro_noise_step = self._baro_steps
+        error_down = -(baro_drift_step(dt_s) + baro_noise_step(dt_s) - self._baro_origin_m)
         velocity_sigma = spec.velocity_noise_sigma_m_s
-        imu = self._imu_noise
+        imu_next = self._imu_noise.next
+        true_north_m_s, true_east_m_s, true_down_m_s = velocity_ned_m_s
         # IMU delta-velocity over the step (true change plus accelerometer noise, plus the gravity
         # leak below).
-        previous = self._previous_velocity or (velocity_ned_m_s[0], velocity_ned_m_s[1])
-        self._previous_velocity = (velocity_ned_m_s[0], velocity_ned_m_s[1])
+        previous = self._previous_velocity or (true_north_m_s, true_east_m_s)
+        self._previous_velocity = (true_north_m_s, true_east_m_s)
         accel_noise = spec.imu_accel_noise_m_s2 * dt_s
-        delta_north = velocity_ned_m_s[0] - previous[0] + accel_noise * imu.next()
-        delta_east = velocity_ned_m_s[1] - previous[1] + accel_noise * imu.next()
+        delta_north = true_north_m_s - previous[0] + accel_noise * imu_next()
+        delta_east = true_east_m_s - previous[1] + accel_noise * imu_next()
         rangefinder_m = None
         if spec.rangefinder_present:
             height_m = -down_m
-            slant_m = height_m / max(tilt_cos, 0.3) + spec.rangefinder_noise_sigma_m * self._rangefinder_noise.next()
+            tilt_floor = 0.3 if 0.3 > tilt_cos else tilt_cos  # max(tilt_cos, 0.3)
+            slant_m = height_m / tilt_floor + spec.rangefinder_noise_sigma_m * self._rangefinder_noise.next()
             if self.rangefinder_min_m <= slant_m <= self.rangefinder_max_m:
                 rangefinder_m = slant_m * tilt_cos
-        velocity_north_m_s = velocity_ned_m_s[0] + velocity_sigma * self._velocity_noise.next()
-        velocity_east_m_s = velocity_ned_m_s[1] + velocity_sigma * self._velocity_noise.next()
-        velocity_down_m_s = velocity_ned_m_s[2] + velocity_sigma * self._velocity_noise.next()
-        roll_error_rad = self._roll_error.step(dt_s)
-        pitch_error_rad = self._pitch_error.step(dt_s)
-        heading_error_rad = self._heading_error.step(dt_s)
+        velocity_next = self._velocity_noise.next
+        velocity_north_m_s = true_north_m_s + velocity_sigma * velocity_next()
+        velocity_east_m_s = true_east_m_s + velocity_sigma * velocity_next()
+        velocity_down_m_s = true_down_m_s + velocity_sigma * velocity_next()
+        roll_step, pitch_step, heading_step = self._attitude_steps
+        roll_error_rad = roll_step(dt_s)
+        pitch_error_rad = pitch_step(dt_s)
+        heading_error_rad = heading_step(dt_s)
         # The EKF rotates the accelerometers' specific force (about g upwards) with its own attitude,
         # so an attitude error leaks gravity into the NED delta-velocity: body (forward, right)
         # error (-g * pitch error, g * roll error). It is what makes dead-reckoning between sensor

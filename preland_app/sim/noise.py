@@ -40,12 +40,12 @@ class GaussMarkov:
     The initial value is drawn from the stationary distribution.
     """
 
-    __slots__ = ("sigma", "tau_s", "value", "_noise", "_dt_s", "_a", "_b")
+    __slots__ = ("sigma", "tau_s", "value", "_next", "_dt_s", "_a", "_b")
 
     def __init__(self, *, sigma: float, tau_s: float, noise: GaussianStream) -> None:
         self.sigma = sigma
         self.tau_s = tau_s
-        self._noise = noise
+        self._next = noise.next  # the stream's draw, looked up once: processes step ~12 times a physics step
         self.value = sigma * noise.next()
         self._dt_s = -1.0
         self._a = 0.0
@@ -56,8 +56,8 @@ class GaussMarkov:
             self._dt_s = dt_s
             self._a = math.exp(-dt_s / self.tau_s) if self.tau_s > 0 else 0.0
             self._b = self.sigma * math.sqrt(max(0.0, 1.0 - self._a * self._a))
-        self.value = self._a * self.value + self._b * self._noise.next()
-        return self.value
+        self.value = value = self._a * self.value + self._b * self._next()
+        return value
 
     def retune(self, *, sigma: float, tau_s: float) -> None:
         """Change sigma and time constant, keeping the current value (scaled to the new sigma)."""
@@ -88,7 +88,8 @@ class SmoothGaussMarkov:
 
     def step(self, dt_s: float) -> float:
         inner = self._inner.step(dt_s)
-        self.value += (inner - self.value) * min(1.0, dt_s / self._smooth_s)
+        gain = dt_s / self._smooth_s
+        self.value += (inner - self.value) * (gain if gain < 1.0 else 1.0)  # min(1.0, gain), without the call
         return self.value
 
 

@@ -171,6 +171,12 @@ class ParameterTable:
         self._values: dict[str, float] = {name: float(info.default) for name, info in ARDUCOPTER_PARAMS.items()}
         # `value(name)`: the stored value, straight from the dict (the autopilot reads a dozen a physics step).
         self.value: Callable[[str], float] = self._values.__getitem__
+        # `m_s(name)`: a cm/s (or cm/s/s, cm) parameter in m/s (m/s/s, m), kept in step with `_values` by `set`
+        # (the simulator reads ~90k a trial).
+        self._si_values: dict[str, float] = {name: value / 100.0 for name, value in self._values.items()}
+        self.m_s: Callable[[str], float] = self._si_values.__getitem__
+        # Counts `set` calls, so that readers may cache what they derive from the table until it changes.
+        self.version = 0
         for name, value in (overrides or {}).items():
             self.set(name, value)
 
@@ -200,10 +206,7 @@ class ParameterTable:
             info.maximum is not None and rounded > info.maximum
         ):
             raise ValueError(f"{name}={value:g} is outside {info.minimum:g}..{info.maximum:g} {info.units}")
-        self._values[name] = info.kind.stored(value)
-
-    # SI helpers for the simulator.
-    def m_s(self, name: str) -> float:
-        """A cm/s (or cm/s/s, cm) parameter in m/s (m/s/s, m)."""
-        return self._values[name] / 100.0
+        self._values[name] = stored = info.kind.stored(value)
+        self._si_values[name] = stored / 100.0
+        self.version += 1
 
