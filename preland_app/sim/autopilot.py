@@ -294,11 +294,13 @@ class Autopilot:
         self._hold_here()
 
     def precland_enabled(self) -> bool:
-        if self._params_version != self.params.version:
-            self._derive_from_params()
+        self._derive_from_params()
         return self._precland_enabled
 
     def _derive_from_params(self) -> None:
+        """Bring what the control loop derives from the parameters up to date (a no-op until one is set)."""
+        if self._params_version == self.params.version:
+            return
         value = self.params.value
         self._precland_enabled = value("PLND_ENABLED") == 1 and value("PLND_TYPE") == PLND_TYPE_COMPANION
         self._angle_max_rad = math.radians(value("ANGLE_MAX") / 100.0)
@@ -330,7 +332,8 @@ class Autopilot:
     def step(self, *, dt_s: float, now_s: float, nav: NavEstimate, yaw_rad: float,
              touching_ground: bool, roll_rad: float = 0.0, pitch_rad: float = 0.0) -> ActuatorDemand:
         """Run one control cycle on the estimate; returns the actuator demand."""
-        precland_enabled = self.precland_enabled()  # also brings what is derived from the parameters up to date
+        self._derive_from_params()
+        precland_enabled = self._precland_enabled
         if precland_enabled:  # only precision landing reads the gyro
             # The gyro's rate (rad/s) from the attitude's change over the step: small angles, so Euler rates will do.
             yaw_change_rad = math.remainder(yaw_rad - self.yaw_rad, 2 * math.pi)
@@ -428,14 +431,10 @@ class Autopilot:
         value, m_s = self.params.value, self.params.m_s
         if loiter:
             accel_max_m_s2 = self._loiter_accel_m_s2
-            if LOITER_VEL_CORRECTION_MAX_M_S < speed_max_m_s:  # min(speed_max_m_s, LOITER_VEL_CORRECTION_MAX_M_S)
-                speed_max_m_s = LOITER_VEL_CORRECTION_MAX_M_S
+            speed_max_m_s = min(speed_max_m_s, LOITER_VEL_CORRECTION_MAX_M_S)
         else:
             accel_max_m_s2 = m_s("WPNAV_ACCEL")
-        if velocity_feedback:
-            velocity_north, velocity_east = velocity_feedback
-        else:
-            velocity_north, velocity_east = nav.velocity_north_m_s, nav.velocity_east_m_s
+        velocity_north, velocity_east = velocity_feedback or (nav.velocity_north_m_s, nav.velocity_east_m_s)
         roll, pitch = self._xy.update(
             dt_s=dt_s,
             yaw_rad=self.yaw_rad,

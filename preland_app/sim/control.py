@@ -172,22 +172,17 @@ class VerticalController:
         own acceleration as feed-forward plus PSC_VELZ_P times the climb-rate error, limited to +-1 g."""
         feedforward = self._last_delta_m_s / dt_s if dt_s > 0 else 0.0
         accel = feedforward + vel_p * (self.climb_demand_m_s - est_climb_rate_m_s)
-        # max(-g, min(g, accel)) as comparisons (the same value, without the calls): this runs every step
-        accel = accel if accel < GRAVITY_M_S2 else GRAVITY_M_S2
-        return accel if accel > -GRAVITY_M_S2 else -GRAVITY_M_S2
+        return max(-GRAVITY_M_S2, min(GRAVITY_M_S2, accel))
 
     def climb_for_altitude(self, *, target_alt_m: float, est_alt_m: float, pos_p: float,
                            accel_max_m_s2: float, speed_up_m_s: float, speed_down_m_s: float) -> float:
         rate = sqrt_controller(target_alt_m - est_alt_m, pos_p, accel_max_m_s2)
-        rate = rate if rate < speed_up_m_s else speed_up_m_s  # max(-speed_down_m_s, min(speed_up_m_s, rate))
-        return rate if rate > -speed_down_m_s else -speed_down_m_s
+        return max(-speed_down_m_s, min(speed_up_m_s, rate))
 
     def shape(self, *, dt_s: float, climb_rate_m_s: float, accel_max_m_s2: float) -> float:
         """Slew the climb demand towards `climb_rate_m_s` at `accel_max_m_s2`; returns it."""
         max_delta = accel_max_m_s2 * dt_s
-        delta = climb_rate_m_s - self.climb_demand_m_s
-        delta = delta if delta < max_delta else max_delta  # max(-max_delta, min(max_delta, delta))
-        delta = delta if delta > -max_delta else -max_delta
+        delta = max(-max_delta, min(max_delta, climb_rate_m_s - self.climb_demand_m_s))
         self.climb_demand_m_s += delta
         self._last_delta_m_s = delta
         return self.climb_demand_m_s

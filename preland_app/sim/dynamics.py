@@ -86,27 +86,20 @@ class MultirotorDynamics:
             s.on_ground = False
 
         if demand.motors_armed:
-            # Comparisons in place of min/max (the same values, without the calls): this runs every step.
-            att_gain = dt_s / airframe.attitude_tau_s
-            att_gain = att_gain if att_gain < 1.0 else 1.0  # min(1.0, att_gain)
+            att_gain = min(1.0, dt_s / airframe.attitude_tau_s)
             s.roll_rad += (demand.roll_rad - s.roll_rad) * att_gain
             s.pitch_rad += (demand.pitch_rad - s.pitch_rad) * att_gain
             yaw_error = (demand.yaw_rad - s.yaw_rad + math.pi) % (2.0 * math.pi) - math.pi
             max_step = self._yaw_rate_max_rad_s * dt_s
-            yaw_step = yaw_error if yaw_error < max_step else max_step  # max(-max_step, min(max_step, yaw_error))
-            s.yaw_rad += yaw_step if yaw_step > -max_step else -max_step
+            s.yaw_rad += max(-max_step, min(max_step, yaw_error))
             # Thrust tilt -> horizontal acceleration in the body frame, rotated to NED.
-            pitch_rad = s.pitch_rad
-            tan_pitch = math.tan(pitch_rad)
+            tan_pitch = math.tan(s.pitch_rad)
             accel_forward = -GRAVITY_M_S2 * tan_pitch
-            cos_pitch = math.cos(pitch_rad)
-            accel_right = GRAVITY_M_S2 * math.tan(s.roll_rad) / (0.2 if 0.2 > cos_pitch else cos_pitch)  # max(.., 0.2)
-            yaw_rad = s.yaw_rad
-            cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
+            accel_right = GRAVITY_M_S2 * math.tan(s.roll_rad) / max(math.cos(s.pitch_rad), 0.2)
+            cy, sy = math.cos(s.yaw_rad), math.sin(s.yaw_rad)
             accel_north = accel_forward * cy - accel_right * sy
             accel_east = accel_forward * sy + accel_right * cy
-            thrust_gain = dt_s / airframe.thrust_tau_s
-            thrust_gain = thrust_gain if thrust_gain < 1.0 else 1.0  # min(1.0, thrust_gain)
+            thrust_gain = min(1.0, dt_s / airframe.thrust_tau_s)
             s.accel_up_m_s2 += (demand.climb_accel_m_s2 - s.accel_up_m_s2) * thrust_gain
             climb_rate = -s.velocity_down_m_s + s.accel_up_m_s2 * dt_s
             # Vertical gusts push the vehicle until the climb-rate loop catches up.

@@ -132,8 +132,7 @@ class NavigationModel:
         rangefinder_m = None
         if spec.rangefinder_present:
             height_m = -down_m
-            tilt_floor = 0.3 if 0.3 > tilt_cos else tilt_cos  # max(tilt_cos, 0.3)
-            slant_m = height_m / tilt_floor + spec.rangefinder_noise_sigma_m * self._rangefinder_noise.next()
+            slant_m = height_m / max(tilt_cos, 0.3) + spec.rangefinder_noise_sigma_m * self._rangefinder_noise.next()
             if self.rangefinder_min_m <= slant_m <= self.rangefinder_max_m:
                 rangefinder_m = slant_m * tilt_cos
         velocity_next = self._velocity_noise.next

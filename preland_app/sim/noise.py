@@ -88,8 +88,7 @@ class SmoothGaussMarkov:
 
     def step(self, dt_s: float) -> float:
         inner = self._inner.step(dt_s)
-        gain = dt_s / self._smooth_s
-        self.value += (inner - self.value) * (gain if gain < 1.0 else 1.0)  # min(1.0, gain), without the call
+        self.value += (inner - self.value) * min(1.0, dt_s / self._smooth_s)
         return self.value
 
 

@@ -69,7 +69,6 @@ class Simulator:
         self.autopilot = Autopilot(params=self.params, initial_yaw_rad=yaw_rad,
                                    firmware=self.environment.autopilot.firmware)
         self.battery_used_mah = 0.0
-        self._hover_current_a = self.environment.airframe.hover_current_a
         self.steps = 0
         self.nav: NavEstimate = self._estimate(0.0)
         # Give the autopilot its first estimate so commands can be checked before the first step.
@@ -90,19 +89,21 @@ class Simulator:
     def step(self) -> None:
         """Advance the world by one physics step."""
         dt_s = self.dt_s
-        time_s = self.time_s
         s = self.dynamics.state
         wind = self.air.step(dt_s=dt_s, height_m=-s.down_m,
                              velocity_ned_m_s=(s.velocity_north_m_s, s.velocity_east_m_s, s.velocity_down_m_s))
-        demand = self.autopilot.step(dt_s=dt_s, now_s=time_s, nav=self.nav, yaw_rad=s.yaw_rad,
+        demand = self.autopilot.step(dt_s=dt_s, now_s=self.time_s, nav=self.nav, yaw_rad=s.yaw_rad,
                                      touching_ground=s.on_ground, roll_rad=s.roll_rad, pitch_rad=s.pitch_rad)
-        self.dynamics.step(dt_s=dt_s, time_s=time_s + dt_s, demand=demand, wind_ned_m_s=wind)
-        self.time_s = time_s + dt_s
+        self.dynamics.step(dt_s=dt_s, time_s=self.time_s + dt_s, demand=demand, wind_ned_m_s=wind)
+        self.time_s += dt_s
         self.steps += 1
         self.nav = self._estimate(dt_s)
-        # The battery's drain (inlined: once a step).
-        if demand.motors_armed:
-            current_a = 1.5 if s.on_ground else self._hover_current_a
+        self._drain_battery(dt_s, demand.motors_armed, s.on_ground)
+
+    def _drain_battery(self, dt_s: float, armed: bool, on_ground: bool) -> None:
+        airframe = self.environment.airframe
+        if armed:
+            current_a = 1.5 if on_ground else airframe.hover_current_a
         else:
             current_a = 0.3
         self.battery_used_mah += current_a * dt_s / 3.6
