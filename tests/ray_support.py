@@ -22,6 +22,8 @@ NODE_SITL = "/bin/false"  # the SITL binary the Ray node advertises: one that ex
 # The bound on a driver's waits is for one that hangs, not a speed target: a Ray driver on a loaded 2-core
 # machine takes minutes to start and run a few trials.
 DRIVER_HANG_S = 600.0
+# How long the module's instance may take to have its workers up (a bound for one that never does).
+WORKERS_UP_S = 300.0
 
 
 def descendants(pid: int) -> set[int]:
@@ -68,6 +70,16 @@ def wait_gone(pids: set[int], timeout_s: float = 60.0) -> list[str]:
     return [cmdline(pid)[:80] for pid in pids if alive(pid)]
 
 
+def wait_idle_workers(pid: int, count: int, timeout_s: float) -> None:
+    """Wait until `count` of the Ray workers below `pid` are up and idle (Ray titles one so once started)."""
+    deadline = time.monotonic() + timeout_s
+    while sum(cmdline(child).startswith("ray::IDLE") for child in ray_processes(pid)) < count:
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{count} idle Ray workers were not up within {timeout_s:g} s: "
+                                 f"{sorted(cmdline(child)[:40] for child in ray_processes(pid))}")
+        time.sleep(0.2)
+
+
 @pytest.fixture(scope="module")
 def cluster():
     """A local Ray instance with 2 CPUs and one `sitl` slot, whose nodes' $PRELAND_SITL_BINARY is NODE_SITL;
@@ -86,6 +98,10 @@ def cluster():
         else:
             os.environ[SITL_ENV] = previous
     address = ray.get_runtime_context().gcs_address
+    # Ray starts the node's idle workers after `init` returns: each imports Ray and preland, several CPU
+    # seconds in all. Waited for here, so that this start-up is over before the module's first test starts a
+    # driver's Ray instance of its own (whose raylet gives its agents a fixed 15 s to start).
+    wait_idle_workers(os.getpid(), 2, timeout_s=WORKERS_UP_S)
     yield address
     started = ray_processes(os.getpid())
     ray.shutdown()
