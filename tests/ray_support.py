@@ -100,7 +100,7 @@ def cluster():
     address = ray.get_runtime_context().gcs_address
     # Ray starts the node's idle workers after `init` returns: each imports Ray and preland, several CPU
     # seconds in all. Waited for here, so that this start-up is over before the module's first test starts a
-    # driver's Ray instance of its own (whose raylet gives its agents a fixed 15 s to start).
+    # driver's Ray instance of its own (whose raylet gives its agents a fixed time to start).
     wait_idle_workers(os.getpid(), 2, timeout_s=WORKERS_UP_S)
     yield address
     started = ray_processes(os.getpid())
