@@ -98,10 +98,14 @@ def cluster():
         else:
             os.environ[SITL_ENV] = previous
     address = ray.get_runtime_context().gcs_address
-    # Ray starts the node's idle workers after `init` returns: each imports Ray and preland, several CPU
-    # seconds in all. Waited for here, so that this start-up is over before the module's first test starts a
+    # Ray starts the node's workers as the node comes up, and `init` can return while they still start (each
+    # imports Ray). Waited for here, so that their start is over before the module's first test starts a
     # driver's Ray instance of its own (whose raylet gives its agents a fixed time to start).
-    wait_idle_workers(os.getpid(), 2, timeout_s=WORKERS_UP_S)
+    try:
+        wait_idle_workers(os.getpid(), 2, timeout_s=WORKERS_UP_S)
+    except AssertionError:
+        ray.shutdown()  # no Ray process left behind by a module that could not start
+        raise
     yield address
     started = ray_processes(os.getpid())
     ray.shutdown()

@@ -26,9 +26,9 @@ from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, Exec
 
 # Ray waits a fixed 30 s for a local node's raylet to register (ray/_private/node.py, not configurable), and the
 # raylet waits a fixed time for its Python agents to start before it aborts ("Timed out waiting for file
-# .../metrics_agent_port_..." in raylet.out; 18 s after it started them, in one loaded run here). On a loaded
-# machine the agents' imports can take longer; a next try often starts. A start that timed out so is tried
-# again, up to this many tries in all.
+# .../metrics_agent_port_..." in raylet.out; 18 s after it started them, in one run of the test suite here).
+# On a loaded machine the agents' imports can take longer; a next try often starts. A start that timed out so
+# is tried again, up to this many tries in all.
 LOCAL_START_TRIES = 5
 _STARTUP_TIMED_OUT = "timed out during startup"
 # Ray starts its workers at nice 15 (its `worker_niceness`), so that they yield to Ray's own daemons. Trials
