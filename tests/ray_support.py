@@ -17,6 +17,7 @@ from preland_app.campaign.executors.ray import start_local_ray
 from preland_app.runtime.sitl import SITL_ENV
 
 from .conftest import ROOT
+from .waiting import until
 
 NODE_SITL = "/bin/false"  # the SITL binary the Ray node advertises: one that exits before its vehicle answers
 # The bound on a driver's waits is for one that hangs, not a speed target: a Ray driver on a loaded 2-core
@@ -70,16 +71,6 @@ def wait_gone(pids: set[int], timeout_s: float = 60.0) -> list[str]:
     return [cmdline(pid)[:80] for pid in pids if alive(pid)]
 
 
-def wait_idle_workers(pid: int, count: int, timeout_s: float) -> None:
-    """Wait until `count` of the Ray workers below `pid` are up and idle (Ray titles one so once started)."""
-    deadline = time.monotonic() + timeout_s
-    while sum(cmdline(child).startswith("ray::IDLE") for child in ray_processes(pid)) < count:
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{count} idle Ray workers were not up within {timeout_s:g} s: "
-                                 f"{sorted(cmdline(child)[:40] for child in ray_processes(pid))}")
-        time.sleep(0.2)
-
-
 @pytest.fixture(scope="module")
 def cluster():
     """A local Ray instance with 2 CPUs and one `sitl` slot, whose nodes' $PRELAND_SITL_BINARY is NODE_SITL;
@@ -102,7 +93,9 @@ def cluster():
     # imports Ray). Waited for here, so that their start is over before the module's first test starts a
     # driver's Ray instance of its own (whose raylet gives its agents a fixed time to start).
     try:
-        wait_idle_workers(os.getpid(), 2, timeout_s=WORKERS_UP_S)
+        until(lambda: sum(cmdline(child).startswith("ray::IDLE") for child in ray_processes(os.getpid())) >= 2,
+              timeout_s=WORKERS_UP_S, what="the 2 workers of the module's Ray instance to be up (titled ray::IDLE)",
+              poll_s=0.2)  # each look walks /proc: not every 10 ms beside the start it waits for
     except AssertionError:
         ray.shutdown()  # no Ray process left behind by a module that could not start
         raise
