@@ -10,7 +10,10 @@ from pathlib import Path
 for _name in ("OPENCV_FOR_THREADS_NUM", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
+import functools
+
 import pytest
+import typer.testing
 
 from preland_app.config.mission import MissionSpec, load_mission
 from preland_app.runtime.embedded import TrialRequest, run_trial
@@ -20,6 +23,12 @@ THESIS_MISSION = ROOT / "missions" / "thesis_square_land.yaml"
 # The thesis mission made short (5 m, 1 m legs): for tests of what surrounds a flight over MAVLink (field
 # campaigns, fault kinds and commands, camera land modes), where the thesis' own altitude only adds vehicle seconds.
 SHORT_MISSION = ROOT / "tests" / "data" / "short_square_land.yaml"
+
+# typer's CliRunner builds the whole click command tree from the app's functions on every `invoke` (about
+# 25 ms each, and the suite invokes hundreds of times). The tree of one app does not change between
+# invocations: the choices that registries hold are read when an option is shown or checked (cli/app.py),
+# not when the tree is built. So each app's tree is built once per test process.
+typer.testing._get_command = functools.cache(typer.testing._get_command)
 
 
 @pytest.fixture(scope="session")
