@@ -94,8 +94,8 @@ def test_fly_on_sitl_from_the_cli(fake_sitl):
     import json as json_module
 
     script, _ = fake_sitl
-    result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--sitl", str(script), "--sitl-speedup", "20",
-                                      "--seed", "3", "--json"])
+    result = CliRunner().invoke(app, ["fly", str(THESIS_MISSION), "--sitl", str(script), "--sitl-speedup",
+                                      f"{STAND_IN_SPEEDUP:g}", "--seed", "3", "--json"])
     assert result.exit_code == 0, result.output
     data = json_module.loads(result.stdout.strip().splitlines()[-1])
     assert data["outcome"] == "landed" and data["details"]["runtime"] == "sitl"
