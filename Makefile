@@ -1,10 +1,10 @@
 # Two entry points for a fresh machine: `make campaign` (the main job) and `make test`.
 # Each creates .venv and installs the project from pyproject.toml on first use.
 # The interpreter .venv is made from: the system's own /usr/bin/python3 when it is 3.11 or newer and can make a
-# venv, else python3 on PATH; `make PYTHON=...` chooses another. Distributions (Debian, Ubuntu, Fedora) build
-# their python3 with profile-guided and link-time optimisation into one static binary; an interpreter built from
-# source with default options (pyenv's, for one) is neither, and runs preland's simulations slower (see
-# docs/contributing.md). An existing .venv is kept whatever its interpreter: `make clean` first to change it.
+# venv, else python3 on PATH; `make PYTHON=...` chooses another. Debian builds its python3 with profile-guided and
+# link-time optimisation into one static binary; an interpreter built from source without --enable-optimizations
+# (as the pyenv builds on the CI machine are) runs preland's simulations slower (see docs/contributing.md).
+# An existing .venv is kept whatever its interpreter: `make clean` first to change it.
 SYSTEM_PYTHON := /usr/bin/python3
 PYTHON ?= $(shell $(SYSTEM_PYTHON) -c 'import sys, ensurepip; sys.exit(sys.version_info < (3, 11))' \
 	>/dev/null 2>&1 && echo $(SYSTEM_PYTHON) || echo python3)

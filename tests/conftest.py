@@ -25,7 +25,7 @@ THESIS_MISSION = ROOT / "missions" / "thesis_square_land.yaml"
 SHORT_MISSION = ROOT / "tests" / "data" / "short_square_land.yaml"
 
 # typer's CliRunner builds the whole click command tree from the app's functions on every `invoke` (about
-# 25 ms each, and the suite invokes hundreds of times). The tree of one app does not change between
+# 25 ms each, and most test modules invoke the CLI). The tree of one app does not change between
 # invocations: the choices that registries hold are read when an option is shown or checked (cli/app.py),
 # not when the tree is built. So each app's tree is built once per test process.
 typer.testing._get_command = functools.cache(typer.testing._get_command)
