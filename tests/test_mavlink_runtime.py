@@ -183,7 +183,7 @@ def test_a_stalled_truth_stream_blinds_the_sensors_instead_of_showing_old_views(
 
     served.face._send_sim_state = stalled_sim_state
     outcome = _fly_irlock_paced_then_stop(served, short_mission, seed=4)
-    assert stall["skipped"] >= 40  # SIM_STATE at 50 Hz for 2.5 s: about 125
+    assert stall["skipped"] >= 40, (outcome.outcome, outcome.message)  # SIM_STATE at 50 Hz for 2.5 s: about 125
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert outcome.landing_error_cm < 15.0
     # The IR-LOCK's 50 Hz ticks in the stall gave nothing (and a few outside it, between two SIM_STATEs).
