@@ -215,11 +215,11 @@ class MavlinkVehicle:
             if time.monotonic() > deadline:
                 raise LinkLost(operation="connect", reason="MAVSDK's message stream delivered nothing")
             await asyncio.sleep(0.01)
-        # Paced, the simulator may hold at time 0 (sim serve --paced): its HEARTBEAT is enough. In lock-step
-        # the clock is the physics' and the link's rate is never read, and SITL runs free until the mission's
-        # start (`LockstepClock.start_at`): each wall second spent here is vehicle seconds of that margin.
-        rate_needed = not self.paced and self._lockstep is None
-        while (rate_needed and not self._clock.settled) or "HEARTBEAT" not in self._messages:
+        # Only a followed clock needs the link's rate measured. Paced, the simulator may hold at time 0 (sim serve
+        # --paced): its HEARTBEAT is enough. In lock-step SITL runs free until the mission's start
+        # (`LockstepClock.start_at`): each wall second spent here is vehicle seconds of that margin.
+        followed = self.clock is self._clock
+        while (followed and not self._clock.settled) or "HEARTBEAT" not in self._messages:
             if time.monotonic() > deadline:
                 raise LinkLost(operation="connect", reason="no telemetry from the autopilot")
             await self._request_streams()
