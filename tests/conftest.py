@@ -54,10 +54,10 @@ def square_trial(thesis_mission):
 # the order once at most two of its tests are left to run: so a file's last two tests are short ones. The
 # vehicle tutorials have two tests, so their worker takes the next file at once, to run after them: the
 # seventh is a short one. Any file not named keeps its place after these.
-FIRST_WAVE = ("test_field_campaign.py", "test_campaign_ray_drivers.py", "test_campaign_ray.py",
-              "test_mavlink_runtime.py", "test_docs_site.py", "test_docs_tutorials_vehicle.py")
+FIRST_WAVE = ("test_field_campaign.py", "test_campaign_ray.py", "test_mavlink_runtime.py", "test_docs_site.py",
+              "test_docs_tutorials_vehicle.py", "test_docs_tutorials.py")
 LONGEST_FIRST = FIRST_WAVE + (
-    "test_endpoint.py", "test_mavlink_camera.py", "test_docs_tutorials.py", "test_calibrate.py",
+    "test_endpoint.py", "test_mavlink_camera.py", "test_calibrate.py",
     "test_sitl_failures.py", "test_sitl.py", "test_campaign.py", "test_roi_render.py", "test_runtimes.py",
     "test_field_ops.py", "test_campaign_drivers.py", "test_figures.py", "test_error_budget_pinned.py",
     "test_ground_effect.py", "test_precision_landing.py", "test_plugins.py", "test_sensing.py")

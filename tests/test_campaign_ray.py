@@ -1,7 +1,8 @@
-"""Campaigns on Ray in this process: the same rows as local processes, a trial that raises, a retried worker,
-SITL nodes, the Python API, OpenCV's threads and a Ray address checked. One local Ray instance (2 CPUs)
-serves the module (`ray_support.cluster`); the drivers in processes of their own are in
-test_campaign_ray_drivers.py, which `make test` runs on another worker meanwhile."""
+"""Campaigns on Ray. Drivers in processes of their own: Ctrl-C, one SIGKILLed and resumed, two at once; no Ray
+process left behind. In this process: the same rows as local processes, a trial that raises, a retried worker,
+SITL nodes, the Python API, OpenCV's threads and a Ray address checked. One local Ray instance (2 CPUs) serves
+the module (`ray_support.cluster`): the drivers join it or must not. The longest tests first: xdist hands this
+worker its next file once two tests are left."""
 
 import os
 import signal
@@ -13,19 +14,88 @@ from typer.testing import CliRunner
 
 from preland_app.campaign.driver import run_campaign
 from preland_app.campaign.executors import ExecutorError, ExecutorOptions, create_executor
-from preland_app.campaign.executors.ray import RayExecutor
+from preland_app.campaign.executors.ray import LOCAL_WORKER_NICENESS, RayExecutor
 from preland_app.campaign.spec import load_campaign
 from preland_app.campaign.store import ResultsStore
 from preland_app.cli import app
 from preland_app.runtime.sitl import SITL_ENV, SitlOptions, SitlRuntime
 
 from .conftest import ROOT
-from .ray_support import NODE_SITL, alive, cluster, cmdline, descendants  # noqa: F401 (cluster: a fixture)
-from .test_campaign import comparable, write_campaign
+from .ray_support import (NODE_SITL, alive, cluster, cmdline, descendants, driver_process,  # noqa: F401 (cluster)
+                          finished, ray_processes, wait_gone, wait_stored)
+from .test_campaign import QUICK, comparable, write_campaign
+from .tools.terminal import as_from_a_terminal
 
 pytestmark = pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find Ray's processes")
 
 ROW = ("scenario", "trial_index", "seed", "outcome", "message")
+
+
+def test_ctrl_c_stops_a_ray_campaign_with_130_and_a_resumed_one_ends_leaving_no_ray_process(cluster, tmp_path):
+    path = write_campaign(tmp_path, QUICK.replace("trials: 3", "trials: 5"))
+    db = tmp_path / "interrupted.db"
+    args = [str(path), "--db", str(db), "--executor", "ray", "--workers", "1"]
+    driver = driver_process(args, start_new_session=True, preexec_fn=as_from_a_terminal)
+    wait_stored(db, 1, driver)
+    started = ray_processes(driver.pid)
+    assert any("raylet" in cmdline(pid) for pid in started), "the driver starts a local Ray instance of its own"
+    # Its trials run at the driver's own niceness (Ray's default adds 15, which starves them beside any other
+    # busy process): Ray adds its worker niceness to the one its workers inherit, here this process's.
+    workers = [pid for pid in started if cmdline(pid).startswith("ray::")]
+    inherited = min(19, os.getpriority(os.PRIO_PROCESS, 0) + LOCAL_WORKER_NICENESS)
+    assert workers and {os.getpriority(os.PRIO_PROCESS, pid) for pid in workers} == {inherited}
+    os.killpg(driver.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the whole foreground process group
+    _, stderr = driver.communicate(timeout=60)
+    assert driver.returncode == 130, stderr
+    assert "interrupted:" in stderr.decode() and "Traceback" not in stderr.decode()
+    assert wait_gone(started) == []
+    with ResultsStore(db) as store:
+        assert 1 <= len(store.trials("quick")) < 10
+
+    resumed = driver_process([*args, "--resume"])
+    wait_stored(db, 9, resumed)
+    started = ray_processes(resumed.pid)
+    stderr = finished(db, resumed)
+    assert resumed.returncode == 0, stderr
+    assert started and wait_gone(started) == []
+    with ResultsStore(db) as store:
+        keys = [(t["scenario"], t["trial_index"]) for t in store.trials("quick")]
+        assert len(keys) == 10 and len(set(keys)) == 10
+
+
+def test_a_sigkilled_ray_driver_resumes_to_the_rows_of_an_uninterrupted_run(cluster, tmp_path):
+    path = write_campaign(tmp_path, QUICK.replace("trials: 3", "trials: 5"))
+    db = tmp_path / "killed.db"
+    first = driver_process([str(path), "--db", str(db), "--executor", "ray", "--ray-address", cluster])
+    assert 2 <= wait_stored(db, 2, first) < 10
+    first.kill()
+    first.wait(timeout=10)
+    result = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(db), "--resume", "--quiet",
+                                      "--executor", "ray"])
+    assert result.exit_code == 0, result.output
+    with ResultsStore(db) as resumed, ResultsStore(":memory:") as straight:
+        run_campaign(load_campaign(path), straight, workers=1)
+        keys = [(t["scenario"], t["trial_index"]) for t in resumed.trials("quick")]
+        assert len(keys) == 10 and len(set(keys)) == 10
+        assert comparable(resumed, "quick") == comparable(straight, "quick")
+
+
+def test_two_ray_drivers_at_once_one_is_refused_and_every_trial_is_stored_once(cluster, tmp_path):
+    path = write_campaign(tmp_path, QUICK.replace("trials: 3", "trials: 6"))
+    db = tmp_path / "busy.db"
+    first = driver_process([str(path), "--db", str(db), "--executor", "ray", "--ray-address", cluster])
+    wait_stored(db, 1, first)
+    second = CliRunner().invoke(app, ["campaign", "run", str(path), "--db", str(db), "--resume", "--quiet",
+                                      "--executor", "ray"])
+    assert first.poll() is None, "the first driver should still be running"
+    assert second.exit_code == 1 and "Traceback" not in second.output, second.output
+    assert len(second.stderr.strip().splitlines()) == 1
+    assert f"being run by another driver (pid {first.pid} on host" in second.stderr and "ray executor" in second.stderr
+    stderr = finished(db, first)
+    assert first.returncode == 0, stderr
+    with ResultsStore(db) as store:
+        keys = [(t["scenario"], t["trial_index"]) for t in store.trials("quick")]
+        assert len(keys) == 12 and len(set(keys)) == 12
 
 
 def test_smoke_gives_the_same_rows_on_ray_as_on_local_processes(cluster, tmp_path):
