@@ -1,6 +1,7 @@
 """The whole mission over MAVLink (MAVSDK) against the simulator's MAVLink face on localhost."""
 
 import asyncio
+import re
 import threading
 import time
 
@@ -362,6 +363,8 @@ def test_a_paced_flight_against_a_vehicle_that_does_not_pace_is_refused_at_conne
 def test_in_lock_step_a_lost_heartbeat_is_reckoned_in_vehicle_seconds(thesis_mission):
     outcome, silenced_at, ended_at = _silence_heartbeats_in_flight(thesis_mission, seed=5, paced=True)
     assert outcome.outcome is Outcome.LINK_LOST and "vehicle s in lock-step" in outcome.message
+    # The message says when the last HEARTBEAT was read and how many were: a failure names its timeline.
+    assert re.search(r"the last read at \d+\.\d\d s, \d+ read\)", outcome.message), outcome.message
     # HEARTBEATs came at 10 Hz of vehicle time: lost 5 vehicle s after the last, give or take a grant.
     assert 4.8 <= ended_at - silenced_at <= 5.5, (silenced_at, ended_at)
 

@@ -402,10 +402,13 @@ class MavlinkVehicle:
         if locked is not None:
             # In lock-step the vehicle's time passes only with the companion's leave, so silence is vehicle
             # time; a vehicle that stops answering at all is the clock's to find (a wall bound).
-            silent_vehicle_s = locked.now_s() - self._last_heartbeat_vehicle_s
+            now_s = locked.now_s()
+            silent_vehicle_s = now_s - self._last_heartbeat_vehicle_s
             if silent_vehicle_s > self.link_timeout_s:
                 raise LinkLost(operation=operation, reason=f"no heartbeat for {silent_vehicle_s:.1f} vehicle s in "
-                                                          "lock-step")
+                                                          f"lock-step (now {now_s:.2f} s, the last read at "
+                                                          f"{self._last_heartbeat_vehicle_s:.2f} s, "
+                                                          f"{self._heartbeats_read} read)")
         else:
             self._link.check(operation, link_timeout_s=self.link_timeout_s, rate=self._clock.rate)
 
