@@ -355,14 +355,15 @@ def test_a_trial_on_preland_physics_runs_sitl_on_the_json_bridge(fake_sitl, thes
     answered = _answers(logs, launch)
     assert answered > 100 and outcome.details["sitl_json_packets"] >= answered
     # From the mission on, the ground station's HEARTBEAT reaches SITL once each whole vehicle second (the
-    # companion's, in vehicle time, the first a second after the mission's start), none between (MAVSDK's own,
-    # sent each wall second, are held back, also while the streams are asked for again at the start).
+    # companion's, in vehicle time from the connection on, the first at the mission's start), none between
+    # (MAVSDK's own, sent each wall second, are held back from the connection on, also while the streams are
+    # asked for again at the start).
     heard_s = [float(line.split()[0]) for line in (logs / f"{launch['pid']}.heartbeats").read_text().splitlines()]
     # (which needs the connection done before the mission's start: after it, the trial begins where it is)
     assert outcome.details["lockstep_connected_s"] < MISSION_START_S, heard_s
     in_mission_s = [t for t in heard_s if t >= MISSION_START_S - 1e-6]
     assert len(in_mission_s) >= 20
-    first_s = int(MISSION_START_S) + 1
+    first_s = int(MISSION_START_S)
     assert [math.floor(t + 1e-6) for t in in_mission_s] == list(range(first_s, first_s + len(in_mission_s)))
     # (read within the stand-in's next two physics frames, as it steps on from the held time)
     assert all(t - math.floor(t + 1e-6) < 2.5 / FRAME_RATE_HZ for t in in_mission_s), in_mission_s

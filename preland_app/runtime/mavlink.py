@@ -97,6 +97,10 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     side_tasks = [asyncio.ensure_future(companion(vehicle)) for companion in companions]
     try:
         await _race(vehicle.connect(), side_tasks)
+        # In lock-step, the companion's HEARTBEAT from here on, none of MAVSDK's: one that reached SITL after the
+        # mission's start, at a wall time of MAVSDK's, could put a request's answer a loop later. Closed at the
+        # connection, not at the start: one MAVSDK sent just before the start could still reach SITL after it.
+        vehicle.keep_heartbeat_in_vehicle_time()
         if truth:
             await _race(vehicle.wait_for_truth(), side_tasks)
     except BaseException:
@@ -106,9 +110,6 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     connected_s = None
     if lockstep is not None:
         connected_s = await lockstep.start_at()
-        # The companion's HEARTBEAT from here on, none of MAVSDK's: one that reached SITL among the requests
-        # below, at a wall time of MAVSDK's, could put a request's answer a loop later.
-        vehicle.keep_heartbeat_in_vehicle_time()
         await vehicle.restart_streams()  # on a schedule from the mission's start, the same in every trial
     truth_source = None
     if truth:
