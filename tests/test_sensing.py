@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from preland_app.errors import SpecError
-from preland_app.sensing.camera import RPI_CAMERA_V2_640X480, load_calibration
+from preland_app.sensing.camera import R_CAM_FROM_BODY, RPI_CAMERA_V2_640X480, load_calibration
 from preland_app.sensing.fusion import FusedSensor, FusionSpec
 from preland_app.sensing.irlock import IrLockModel, IrLockSpec
 from preland_app.sensing.marker import MarkerDetector, choose_smallest
 from preland_app.sensing.pad import PAPER_PAD, THESIS_PAD
 from preland_app.sensing.readings import TargetReading
-from preland_app.sensing.virtual_camera import CameraPose, VirtualCamera, camera_extrinsics
+from preland_app.sensing.virtual_camera import CameraPose, VirtualCamera, camera_extrinsics, rotation_ned_from_body
 
 PAD_AT = (2.0, 0.0)
 
@@ -107,6 +107,31 @@ def test_irlock_sees_the_beacon_only_inside_its_cone_and_field_of_view():
     assert model.read(_pose(height_m=16.0), capture_time_s=1.0) is None  # above SIM_PLD_ALT_LMT
     assert model.read(_pose(height_m=3.0, north_off_m=2.5), capture_time_s=1.0) is None  # outside the cone
     assert model.read(_pose(height_m=10.0, north_off_m=5.0), capture_time_s=1.0) is None  # outside the FoV
+
+
+def test_irlock_angles_are_the_beacon_seen_from_the_mounted_sensor_at_any_attitude():
+    """The reading (in plain floats) against the same geometry in matrices: the sensor at the vehicle plus its
+    mount offset turned into NED, the beacon in the camera frame (R_CAM_FROM_BODY times the body frame)."""
+    spec = IrLockSpec(noise_sigma_deg=0.0, quantize=False, mount_offset_frd_m=(0.05, -0.0125, 0.02))
+    model = IrLockModel(spec=spec, beacon_ned_m=PAD_AT, rng=np.random.default_rng(0))
+    poses = np.random.default_rng(7)
+    read = 0
+    for _ in range(200):
+        pose = CameraPose(PAD_AT[0] + poses.uniform(-0.3, 0.3), PAD_AT[1] + poses.uniform(-0.3, 0.3),
+                          -poses.uniform(2.0, 10.0), poses.uniform(-0.3, 0.3), poses.uniform(-0.3, 0.3),
+                          poses.uniform(-math.pi, math.pi))
+        r_ned_body = rotation_ned_from_body(pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
+        sensor = np.array([pose.north_m, pose.east_m, pose.down_m]) + r_ned_body @ np.array(spec.mount_offset_frd_m)
+        x, y, z = R_CAM_FROM_BODY @ r_ned_body.T @ (np.array([*PAD_AT, 0.0]) - sensor)
+        reading = model.read(pose, capture_time_s=0.0)
+        if reading is None:  # out of the field of view at this attitude
+            assert max(abs(math.atan2(x, z)), abs(math.atan2(y, z))) > math.radians(min(spec.fov_x_deg,
+                                                                                        spec.fov_y_deg)) / 2
+            continue
+        read += 1
+        assert reading.angle_x_rad == pytest.approx(math.atan2(x, z), abs=1e-12)
+        assert reading.angle_y_rad == pytest.approx(math.atan2(y, z), abs=1e-12)
+    assert read > 150
 
 
 def test_irlock_noise_is_seeded():

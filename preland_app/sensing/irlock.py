@@ -16,9 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import require
-from .camera import R_CAM_FROM_BODY
 from .readings import TargetReading, angles_from_camera_point
-from .virtual_camera import CameraPose, rotation_ned_from_body
+from .virtual_camera import CameraPose, rotation_ned_from_body_rows
 
 
 class BeaconShape(enum.Enum):
@@ -70,7 +69,7 @@ class IrLockModel:
 
     def __init__(self, *, spec: IrLockSpec, beacon_ned_m: tuple[float, float], rng: np.random.Generator) -> None:
         self.spec = spec
-        self.beacon = np.array([beacon_ned_m[0], beacon_ned_m[1], 0.0])
+        self.beacon_ned_m = (float(beacon_ned_m[0]), float(beacon_ned_m[1]), 0.0)
         self._rng = rng
         self._half_fov_x = math.radians(spec.fov_x_deg) / 2.0
         self._half_fov_y = math.radians(spec.fov_y_deg) / 2.0
@@ -83,7 +82,7 @@ class IrLockModel:
         height_m = -pose.down_m
         if not 0.0 < height_m <= self.spec.alt_limit_m:
             return False
-        lateral_m = math.hypot(self.beacon[0] - pose.north_m, self.beacon[1] - pose.east_m)
+        lateral_m = math.hypot(self.beacon_ned_m[0] - pose.north_m, self.beacon_ned_m[1] - pose.east_m)
         if self.spec.shape is BeaconShape.CONE:
             return lateral_m <= self.spec.dist_limit_m * height_m / self.spec.alt_limit_m
         return lateral_m <= self.spec.dist_limit_m
@@ -92,12 +91,24 @@ class IrLockModel:
         """A reading at `pose`, or None when the beacon is out of view or out of reach."""
         if not self.visible(pose):
             return None
-        r_ned_body = rotation_ned_from_body(pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
-        sensor = np.array([pose.north_m, pose.east_m, pose.down_m]) + r_ned_body @ np.array(self.spec.mount_offset_frd_m)
-        x, y, z = R_CAM_FROM_BODY @ r_ned_body.T @ (self.beacon - sensor)
+        # In plain floats: a reading each physics tick, where numpy's overhead on 3-vectors was most of its
+        # cost; plain arithmetic also gives the same bits whichever BLAS kernel the machine would pick.
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_ned_from_body_rows(
+            pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
+        mount_f, mount_r, mount_d = self.spec.mount_offset_frd_m
+        beacon_n, beacon_e, beacon_d = self.beacon_ned_m
+        # From the sensor (the vehicle plus its mount offset turned into NED) to the beacon, NED (m).
+        to_n = beacon_n - (pose.north_m + (r00 * mount_f + r01 * mount_r + r02 * mount_d))
+        to_e = beacon_e - (pose.east_m + (r10 * mount_f + r11 * mount_r + r12 * mount_d))
+        to_d = beacon_d - (pose.down_m + (r20 * mount_f + r21 * mount_r + r22 * mount_d))
+        # Into the body (the rotation's transpose), then the camera frame (`camera.R_CAM_FROM_BODY`: x = right,
+        # y = -forward, z = down).
+        x = r01 * to_n + r11 * to_e + r21 * to_d
+        y = -(r00 * to_n + r10 * to_e + r20 * to_d)
+        z = r02 * to_n + r12 * to_e + r22 * to_d
         if z <= 0:
             return None
-        angle_x, angle_y = angles_from_camera_point(float(x), float(y), float(z))
+        angle_x, angle_y = angles_from_camera_point(x, y, z)
         if abs(angle_x) > self._half_fov_x or abs(angle_y) > self._half_fov_y:
             return None
         noise = self._noise_rad
