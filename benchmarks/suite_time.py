@@ -6,9 +6,10 @@ CPU it needs divided by the cores: the figure to cut is CPU. Each run prints:
 * wall time (the command's, and the one pytest reports), and the CPU seconds every process on the machine
   used meanwhile (/proc/stat: the suite, its children, Ray's daemons that nobody waits for, the kernel);
 * the cores that kept busy (CPU / wall);
-* a reference workload's CPU (`REFERENCE_TRIALS` IR-LOCK trials of the thesis mission, in this process), timed
-  before and after: the same machine runs the same code 20 % faster or slower from one hour to the next, and
-  the suite's CPU in units of that workload compares runs made at different times;
+* a reference workload's CPU (`reference_cpu_s`: a fixed computation in plain Python that no change to preland
+  alters, in this process), timed before and after: the same machine runs the same code 20 % faster or slower
+  from one hour to the next, and the suite's CPU in units of that workload compares runs made at different
+  times, and commits;
 * the CPU of each test module and of the longest tests (each test's process, its threads and the children
   it waited for, from a pytest plugin this script loads), and what no test accounts for (xdist's start-up
   and collection, Ray's daemons).
@@ -21,6 +22,7 @@ Usage: python benchmarks/suite_time.py [--runs 1] [--top 15]
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import subprocess
 import sys
@@ -31,7 +33,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-REFERENCE_TRIALS = 5
+REFERENCE_LOOPS = 6_000_000  # about 2 CPU s on the 2-core machine CI runs on
 # A pytest plugin that appends one line per test: node id, CPU of the test's process (all its threads) and of
 # the children it waited for, wall time. Written to a temporary folder put on PYTHONPATH for the run.
 PLUGIN = '''
@@ -61,15 +63,14 @@ def busy_cpu_s() -> float:
 
 
 def reference_cpu_s() -> float:
-    """CPU seconds of REFERENCE_TRIALS IR-LOCK trials of the thesis mission on the embedded simulator."""
-    from preland_app.config.mission import load_mission
-    from preland_app.runtime.embedded import TrialRequest, run_trial
-
-    mission = load_mission(ROOT / "missions" / "thesis_square_land.yaml")
-    run_trial(TrialRequest(mission=mission, seed=0, land_mode="irlock"))  # imports and caches, not timed
+    """CPU seconds of a fixed computation in plain Python, of the kinds the simulator does (float arithmetic,
+    calls, a dict): it gauges the machine's speed of the moment, and no change to preland's code alters it."""
     started = time.process_time()
-    for seed in range(1, REFERENCE_TRIALS + 1):
-        run_trial(TrialRequest(mission=mission, seed=seed, land_mode="irlock"))
+    total, table = 0.0, {}
+    for index in range(REFERENCE_LOOPS):
+        x = (index % 97) * 0.5
+        total += math.sin(x) * math.sqrt(x + 1.0) - abs(total) * 1e-9
+        table[index & 1023] = total
     return time.process_time() - started
 
 
@@ -132,7 +133,7 @@ def main() -> int:
             run = run_suite(folder, index)
             after_s = reference_cpu_s()
             reference_s = (before_s + after_s) / 2
-            print(f"run {index} of {args.runs}: reference workload ({REFERENCE_TRIALS} IR-LOCK thesis trials) "
+            print(f"run {index} of {args.runs}: reference workload ({REFERENCE_LOOPS:,} loops in plain Python) "
                   f"{before_s:.2f} s CPU before, {after_s:.2f} s after")
             report(run, reference_s=reference_s, top=args.top)
             if run["returncode"] != 0:
