@@ -14,6 +14,7 @@ from preland_app.runtime.mavlink import fly_mavlink
 from preland_app.sim.mavlink_face import MavlinkFace
 from preland_app.sim.params import ARDUCOPTER_PARAMS
 from preland_app.sim.simulator import Simulator
+from preland_app.vehicle.mavlink_backend import MavlinkVehicle
 from preland_app.vehicle.types import FlightMode
 
 from .test_mavlink_face import free_port
@@ -367,6 +368,42 @@ def test_in_lock_step_a_lost_heartbeat_is_reckoned_in_vehicle_seconds(thesis_mis
     assert re.search(r"the last read at \d+\.\d\d s, \d+ read\)", outcome.message), outcome.message
     # HEARTBEATs came at 10 Hz of vehicle time: lost 5 vehicle s after the last, give or take a grant.
     assert 4.8 <= ended_at - silenced_at <= 5.5, (silenced_at, ended_at)
+
+
+def test_a_grant_longer_than_the_link_timeout_counts_its_heartbeats_and_the_next_companion_goes_on(short_mission):
+    """Paced, the face steps through a whole grant, sending its HEARTBEATs, before its answer moves the
+    companion's clock: those HEARTBEATs count at the vehicle times they were sent, so one grant longer than the
+    link's 5 vehicle s is no lost link. The face then holds between companions (a campaign's next trial, a
+    resumed one), and the next one paces on from where the first left it."""
+    served = ServedSimulator(short_mission, seed=3, paced=True)
+
+    async def first() -> float:
+        vehicle = MavlinkVehicle(url=served.url, paced=True)
+        await vehicle.connect()
+        try:
+            await vehicle.clock.sleep(8.0)  # one grant, past the link's 5 vehicle s without a HEARTBEAT
+            await vehicle.telemetry()
+            return vehicle.clock.now_s()
+        finally:
+            await vehicle.close()
+
+    async def second() -> tuple[float, float]:
+        vehicle = MavlinkVehicle(url=served.url, paced=True)
+        await vehicle.connect()
+        try:
+            started_s = vehicle.clock.now_s()
+            await vehicle.telemetry()
+            return started_s, vehicle.link_timeout_s
+        finally:
+            await vehicle.close()
+
+    try:
+        left_s = asyncio.run(first())
+        started_s, link_timeout_s = asyncio.run(second())
+    finally:
+        served.stop()
+    assert left_s >= 8.0 > link_timeout_s
+    assert started_s == pytest.approx(left_s, abs=0.02), (started_s, left_s)
 
 
 def test_a_paced_command_answered_late_in_wall_time_reaches_the_vehicle_once(short_mission):

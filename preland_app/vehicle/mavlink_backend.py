@@ -352,6 +352,10 @@ class MavlinkVehicle:
             if name == "HEARTBEAT":
                 self._heartbeat_stamp_s = self._clock.newest_s
                 self._last_heartbeat_vehicle_s = self.clock.now_s()
+                if self._paced_clock is not None and self._clock.newest_s is not None:
+                    # Paced, the simulator steps through a whole grant before its answer moves this clock: a
+                    # HEARTBEAT read meanwhile was sent at the time of the stamped messages read before it.
+                    self._last_heartbeat_vehicle_s = max(self._last_heartbeat_vehicle_s, self._clock.newest_s)
                 self._heartbeats_read += 1
                 self._heartbeat_confirms(fields)
             elif name == "COMMAND_ACK":
