@@ -91,8 +91,9 @@ class IrLockModel:
         """A reading at `pose`, or None when the beacon is out of view or out of reach."""
         if not self.visible(pose):
             return None
-        # In plain floats: a reading each physics tick, where numpy's overhead on 3-vectors was most of its
-        # cost; plain arithmetic also gives the same bits whichever BLAS kernel the machine would pick.
+        # In plain floats: read at the sensor's rate (50 Hz) through a landing, where numpy's overhead on
+        # 3-vectors was most of a reading's cost; plain arithmetic also gives the same bits whichever BLAS
+        # kernel the machine would pick.
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_ned_from_body_rows(
             pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
         mount_f, mount_r, mount_d = self.spec.mount_offset_frd_m

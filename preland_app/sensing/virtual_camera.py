@@ -51,8 +51,8 @@ class CameraPose:
 
 def rotation_ned_from_body_rows(roll_rad: float, pitch_rad: float,
                                 yaw_rad: float) -> tuple[tuple[float, float, float], ...]:
-    """ZYX Euler rotation taking body FRD vectors to NED, as three rows of floats (for a sensor that reads at
-    every physics tick, where numpy's overhead on a 3-vector costs more than the arithmetic)."""
+    """ZYX Euler rotation taking body FRD vectors to NED, as three rows of floats (for a sensor read many times
+    a second, where numpy's overhead on a 3-vector costs more than the arithmetic)."""
     cr, sr = math.cos(roll_rad), math.sin(roll_rad)
     cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
     cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
