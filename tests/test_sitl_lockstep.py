@@ -375,10 +375,12 @@ def test_an_answer_read_mid_step_ends_the_step_where_it_was_to_and_the_task_goes
                 await until_async(lambda: bridge.gate.hold_at_s is not None and bridge.gate.hold_at_s > start_s,
                                   timeout_s=30, what="the exchange's step to be let go")
                 step_end_s = bridge.gate.hold_at_s
-                permits.release()
+                # The packet the physics stood at and the one permitted above: two frames of the step's three
+                # at most, so the looks below are mid-step however late this task sees the first.
                 await until_async(lambda: clock.now_s() > start_s, timeout_s=30, what="one frame of the step")
                 clock._apply()  # a look mid-step (another task's sleep, a delivery) keeps the step's end
                 seen["hold_mid_step_s"] = bridge.gate.hold_at_s
+                seen["mid_step_s"] = clock.now_s()
                 answer_in = True  # read off the link in the middle of the step
                 clock._apply()  # the hold, as the clock's next look sets it
                 seen["hold_after_answer_s"] = bridge.gate.hold_at_s
@@ -396,6 +398,7 @@ def test_an_answer_read_mid_step_ends_the_step_where_it_was_to_and_the_task_goes
 
     bridge = _run_on_played_bridge(main, player=player)
     assert seen["step_end_s"] == seen["start_s"] + lockstep_clock.EXCHANGE_STEP_S
+    assert seen["start_s"] < seen["mid_step_s"] < seen["step_end_s"]
     assert seen["hold_mid_step_s"] == seen["step_end_s"]
     assert seen["hold_after_answer_s"] == seen["step_end_s"]  # not the mid-step time the answer was read at
     assert seen["went_on_mid_step"] is False
