@@ -93,3 +93,23 @@ class LocalTangentPlane:
             (point.longitude_deg - self.origin.longitude_deg) / self._deg_lon_per_m,
             self.origin.altitude_amsl_m - point.altitude_amsl_m,
         )
+
+
+def ned_from_body_rows(roll_rad: float, pitch_rad: float, yaw_rad: float) -> tuple[tuple[float, float, float], ...]:
+    """ZYX Euler rotation taking body FRD vectors to NED, as three rows of floats (plain arithmetic: the sensors
+    and the precision-landing model use it many times a second, where numpy's overhead on a 3-vector costs more
+    than the arithmetic)."""
+    cr, sr = math.cos(roll_rad), math.sin(roll_rad)
+    cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
+    cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
+    return ((cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy),
+            (cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy),
+            (-sp, sr * cp, cr * cp))
+
+
+def body_to_ned(rows: tuple[tuple[float, float, float], ...],
+                vector_frd: tuple[float, float, float]) -> tuple[float, float, float]:
+    """A body FRD vector rotated to NED by `rows` (`ned_from_body_rows`)."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
+    x, y, z = vector_frd
+    return r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z

@@ -16,8 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import require
+from ..geo import body_to_ned, ned_from_body_rows
 from .readings import TargetReading, angles_from_camera_point
-from .virtual_camera import CameraPose, rotation_ned_from_body_rows
+from .virtual_camera import CameraPose
 
 
 class BeaconShape(enum.Enum):
@@ -94,14 +95,14 @@ class IrLockModel:
         # In plain floats: read at the sensor's rate (50 Hz) through a landing, where numpy's overhead on
         # 3-vectors was most of a reading's cost; plain arithmetic also gives the same bits whichever BLAS
         # kernel the machine would pick.
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_ned_from_body_rows(
-            pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
-        mount_f, mount_r, mount_d = self.spec.mount_offset_frd_m
+        rows = ned_from_body_rows(pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
+        mount_n, mount_e, mount_d = body_to_ned(rows, self.spec.mount_offset_frd_m)
         beacon_n, beacon_e, beacon_d = self.beacon_ned_m
         # From the sensor (the vehicle plus its mount offset turned into NED) to the beacon, NED (m).
-        to_n = beacon_n - (pose.north_m + (r00 * mount_f + r01 * mount_r + r02 * mount_d))
-        to_e = beacon_e - (pose.east_m + (r10 * mount_f + r11 * mount_r + r12 * mount_d))
-        to_d = beacon_d - (pose.down_m + (r20 * mount_f + r21 * mount_r + r22 * mount_d))
+        to_n = beacon_n - (pose.north_m + mount_n)
+        to_e = beacon_e - (pose.east_m + mount_e)
+        to_d = beacon_d - (pose.down_m + mount_d)
         # Into the body (the rotation's transpose), then the camera frame (`camera.R_CAM_FROM_BODY`: x = right,
         # y = -forward, z = down).
         x = r01 * to_n + r11 * to_e + r21 * to_d

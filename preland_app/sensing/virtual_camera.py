@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..geo import ned_from_body_rows
 from .camera import R_CAM_FROM_BODY, CameraModel
 from .ground_texture import FIELD_EXTENT_M, FIELD_PX_PER_M, GrassTexture, texels_read_by
 from .pad import PadSpec, render_pad_texture
@@ -49,21 +50,9 @@ class CameraPose:
     yaw_rad: float
 
 
-def rotation_ned_from_body_rows(roll_rad: float, pitch_rad: float,
-                                yaw_rad: float) -> tuple[tuple[float, float, float], ...]:
-    """ZYX Euler rotation taking body FRD vectors to NED, as three rows of floats (for a sensor read many times
-    a second, where numpy's overhead on a 3-vector costs more than the arithmetic)."""
-    cr, sr = math.cos(roll_rad), math.sin(roll_rad)
-    cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
-    cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
-    return ((cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy),
-            (cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy),
-            (-sp, sr * cp, cr * cp))
-
-
 def rotation_ned_from_body(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
     """ZYX Euler rotation taking body FRD vectors to NED."""
-    return np.array(rotation_ned_from_body_rows(roll_rad, pitch_rad, yaw_rad))
+    return np.array(ned_from_body_rows(roll_rad, pitch_rad, yaw_rad))
 
 
 def camera_extrinsics(camera: CameraModel, pose: CameraPose) -> tuple[np.ndarray, np.ndarray]:

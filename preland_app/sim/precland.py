@@ -33,6 +33,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+from ..geo import body_to_ned, ned_from_body_rows
 from ..vehicle.types import LandingTarget
 from .params import ParameterTable
 from .spec import Firmware
@@ -172,18 +173,13 @@ class PrecisionLandingEstimator:
         if pose is None or current is None:
             self.measurements_dropped += 1
             return False
-        forward, right, down = -math.tan(target.angle_y_rad), math.tan(target.angle_x_rad), 1.0
-        cr, sr = math.cos(pose.roll_rad), math.sin(pose.roll_rad)
-        cp, sp = math.cos(pose.pitch_rad), math.sin(pose.pitch_rad)
-        cy, sy = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
-        north = cp * cy * forward + (sr * sp * cy - cr * sy) * right + (cr * sp * cy + sr * sy) * down
-        east = cp * sy * forward + (sr * sp * sy + cr * cy) * right + (cr * sp * sy - sr * cy) * down
-        downward = -sp * forward + sr * cp * right + cr * cp * down
+        rows = ned_from_body_rows(pose.roll_rad, pose.pitch_rad, pose.yaw_rad)
+        north, east, downward = body_to_ned(rows, (-math.tan(target.angle_y_rad), math.tan(target.angle_x_rad), 1.0))
         if downward <= 0.05:
             self.measurements_dropped += 1
             return False
         # PLND_CAM_POS_*: the sensor's offset from the vehicle's centre, rotated to NED with the same attitude.
-        cam_n, cam_e, cam_d = _body_to_ned(self._cam_pos_frd_m(), pose)
+        cam_n, cam_e, cam_d = _offset_to_ned(self._cam_pos_frd_m(), rows)
         if target.distance_m is not None and target.distance_m > 0:
             scale = target.distance_m / math.sqrt(north * north + east * east + downward * downward)
         else:
@@ -264,7 +260,9 @@ class PrecisionLandingEstimator:
         cam_x, cam_y, _ = self._cam_pos_frd_m()
         if rel is None or (cam_x == 0.0 and cam_y == 0.0) or not self._history:
             return rel
-        cam_n, cam_e, _ = _body_to_ned((cam_x, cam_y, 0.0), self._history[-1])
+        latest = self._history[-1]
+        cam_n, cam_e, _ = _offset_to_ned((cam_x, cam_y, 0.0),
+                                         ned_from_body_rows(latest.roll_rad, latest.pitch_rad, latest.yaw_rad))
         return rel[0] - cam_n, rel[1] - cam_e
 
     def relative_velocity_m_s(self, now_s: float) -> tuple[float, float] | None:
@@ -289,14 +287,9 @@ def _finite(target: LandingTarget) -> bool:
     return all(math.isfinite(v) for v in values)
 
 
-def _body_to_ned(vector_frd: tuple[float, float, float], pose: _PoseSample) -> tuple[float, float, float]:
-    """A body FRD vector rotated to NED with `pose`'s attitude."""
-    x, y, z = vector_frd
-    if x == 0.0 and y == 0.0 and z == 0.0:
+def _offset_to_ned(vector_frd: tuple[float, float, float],
+                   rows: tuple[tuple[float, float, float], ...]) -> tuple[float, float, float]:
+    """A body FRD offset rotated to NED by `rows`; none (all zeros) stays exactly zero."""
+    if vector_frd[0] == 0.0 and vector_frd[1] == 0.0 and vector_frd[2] == 0.0:
         return 0.0, 0.0, 0.0
-    cr, sr = math.cos(pose.roll_rad), math.sin(pose.roll_rad)
-    cp, sp = math.cos(pose.pitch_rad), math.sin(pose.pitch_rad)
-    cy, sy = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
-    return (cp * cy * x + (sr * sp * cy - cr * sy) * y + (cr * sp * cy + sr * sy) * z,
-            cp * sy * x + (sr * sp * sy + cr * cy) * y + (cr * sp * sy - sr * cy) * z,
-            -sp * x + sr * cp * y + cr * cp * z)
+    return body_to_ned(rows, vector_frd)
