@@ -32,7 +32,6 @@ from collections import defaultdict
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 REFERENCE_LOOPS = 6_000_000  # about 2 CPU s on the 2-core machine CI runs on
 # A pytest plugin that appends one line per test: node id, CPU of the test's process (all its threads) and of
 # the children it waited for, wall time. Written to a temporary folder put on PYTHONPATH for the run.
