@@ -44,11 +44,24 @@ def descendants(pid: int) -> set[int]:
     return found
 
 
-def alive(pid: int) -> bool:
+def started_ticks(pid: int) -> int | None:
+    """When process `pid` started (clock ticks since boot; /proc/PID/stat field 22), None when it is gone."""
     try:
-        return "State:\tZ" not in Path(f"/proc/{pid}/status").read_text()
+        return int((Path(f"/proc/{pid}") / "stat").read_text().rsplit(")", 1)[1].split()[19])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def alive(pid: int, started: int | None = None) -> bool:
+    """Whether `pid` runs (a zombie does not), and is still the process that started at `started` ticks: on a
+    machine that starts thousands of processes and threads a minute, Linux gives a gone process's pid to
+    another within seconds (pid_max is 32768 on 2 cores)."""
+    try:
+        if "State:\tZ" in Path(f"/proc/{pid}/status").read_text():
+            return False
     except OSError:
         return False
+    return started is None or started_ticks(pid) == started
 
 
 def cmdline(pid: int) -> str:
@@ -58,17 +71,20 @@ def cmdline(pid: int) -> str:
         return ""
 
 
-def ray_processes(pid: int) -> set[int]:
-    """Ray's processes under `pid`: its servers (from Ray's package) and its workers ("ray::...")."""
-    return {child for child in descendants(pid)
-            if "site-packages/ray/" in cmdline(child) or cmdline(child).startswith("ray::")}
+def ray_processes(pid: int) -> dict[int, int]:
+    """Ray's processes under `pid`: its servers (from Ray's package) and its workers ("ray::..."), each pid
+    with the ticks it started at (`alive`)."""
+    found = {child: started_ticks(child) for child in descendants(pid)
+             if "site-packages/ray/" in cmdline(child) or cmdline(child).startswith("ray::")}
+    return {child: ticks for child, ticks in found.items() if ticks is not None}
 
 
-def wait_gone(pids: set[int], timeout_s: float = 60.0) -> list[str]:
+def wait_gone(processes: dict[int, int], timeout_s: float = 60.0) -> list[str]:
+    """Wait until none of `processes` (from `ray_processes`) runs; those still running after `timeout_s`."""
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and any(alive(pid) for pid in pids):
+    while time.monotonic() < deadline and any(alive(pid, ticks) for pid, ticks in processes.items()):
         time.sleep(0.2)
-    return [cmdline(pid)[:80] for pid in pids if alive(pid)]
+    return [f"{pid} {cmdline(pid)[:80]}" for pid, ticks in processes.items() if alive(pid, ticks)]
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +118,9 @@ def cluster():
     yield address
     started = ray_processes(os.getpid())
     ray.shutdown()
-    assert started and wait_gone(started) == []
+    assert started, "no process of the module's Ray instance was found under this process at its end"
+    left = wait_gone(started)
+    assert left == [], f"{len(left)} of the module's {len(started)} Ray processes still run 60 s after shutdown"
 
 
 def stored_trials(db: Path) -> int:

@@ -6,6 +6,8 @@ worker its next file once two tests are left."""
 
 import os
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -22,7 +24,7 @@ from preland_app.runtime.sitl import SITL_ENV, SitlOptions, SitlRuntime
 
 from .conftest import ROOT
 from .ray_support import (NODE_SITL, alive, cluster, cmdline, descendants, driver_process,  # noqa: F401 (cluster)
-                          finished, ray_processes, wait_gone, wait_stored)
+                          finished, ray_processes, started_ticks, wait_gone, wait_stored)
 from .test_campaign import QUICK, comparable, write_campaign
 from .tools.terminal import as_from_a_terminal
 
@@ -272,3 +274,19 @@ def test_a_local_ray_that_times_out_during_startup_is_started_again():
     with pytest.raises(Exception, match="some other failure"):
         start_local_ray(other, num_cpus=2)
     assert other.calls == ["init local 2", "shutdown"]
+
+
+def test_a_pid_another_process_was_given_counts_as_gone():
+    """The checks that Ray's processes are gone look at each pid's start time too: a pid Linux gave to a new
+    process since is not the Ray process that had it."""
+    child = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
+    try:
+        ticks = started_ticks(child.pid)
+        assert ticks is not None and alive(child.pid, ticks) and alive(child.pid)
+        assert not alive(child.pid, ticks - 1)  # the same pid, started at another time: another process
+        assert wait_gone({child.pid: ticks - 1}, timeout_s=0.0) == []
+        assert wait_gone({child.pid: ticks}, timeout_s=0.0) == [f"{child.pid} {sys.executable} -c import sys; "
+                                                                  "sys.stdin.read() "]
+    finally:
+        child.communicate(timeout=60)
+    assert started_ticks(child.pid) is None and not alive(child.pid, ticks)
