@@ -23,6 +23,8 @@ THESIS_MISSION = ROOT / "missions" / "thesis_square_land.yaml"
 # The thesis mission made short (5 m, 1 m legs): for tests of what surrounds a flight over MAVLink (field
 # campaigns, fault kinds and commands, camera land modes), where the thesis' own altitude only adds vehicle seconds.
 SHORT_MISSION = ROOT / "tests" / "data" / "short_square_land.yaml"
+# The paper's mission made short (8 m, a 6 m leg), for its algorithms over MAVLink.
+SHORT_PAPER_MISSION = ROOT / "tests" / "data" / "short_paper_land.yaml"
 
 # typer's CliRunner builds the whole click command tree from the app's functions on every `invoke` (about
 # 25 ms each, and most test modules invoke the CLI). The tree of one app does not change between

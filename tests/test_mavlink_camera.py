@@ -45,12 +45,18 @@ def test_the_same_seed_flies_the_same_trial_in_lock_step(short_mission):
 def test_paper_algorithms_over_mavlink(mode):
     from preland_app.config.mission import load_mission
 
-    from .conftest import ROOT
+    from .conftest import SHORT_PAPER_MISSION
 
-    mission = load_mission(ROOT / "missions" / "paper_marker_land.yaml")
+    # The paper's mission made short (from 8 m): both of its nested markers still steer the landing.
+    mission = load_mission(SHORT_PAPER_MISSION)
     outcome, _ = fly_paced(mission, seed=2, land_mode=mode)
     assert outcome.outcome is Outcome.LANDED, outcome.message
     assert outcome.landing_error_cm < 20.0 and not outcome.details["aborted_to_gps"]
+    # Both markers steered, the 18 cm one (id 1) last; Algorithm 2 chose the 56 cm one (id 0) first and switched
+    # once, never back, where Algorithm 1 takes whichever is the highest id in view.
+    chosen = [event.data["to_id"] for event in outcome.events if event.kind == "marker_switch"]
+    assert set(chosen) == {0, 1} and chosen[-1] == 1, chosen
+    assert chosen == [0, 1] if mode == "paper_adaptive" else len(chosen) > 2
 
 
 def test_fault_commands_reach_the_flying_companion(short_mission):
