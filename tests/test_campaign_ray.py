@@ -279,13 +279,17 @@ def test_a_local_ray_that_times_out_during_startup_is_started_again():
 def test_a_pid_another_process_was_given_counts_as_gone():
     """The checks that Ray's processes are gone look at each pid's start time too: a pid Linux gave to a new
     process since is not the Ray process that had it."""
-    child = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
+    program = "import sys; print('up', flush=True); sys.stdin.read()"
+    child = subprocess.Popen([sys.executable, "-c", program], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
     try:
+        # Once it says so, the child runs its own program (Popen returns during the exec, when /proc may
+        # still show no command line).
+        assert child.stdout.readline() == b"up\n"
         ticks = started_ticks(child.pid)
         assert ticks is not None and alive(child.pid, ticks) and alive(child.pid)
         assert not alive(child.pid, ticks - 1)  # the same pid, started at another time: another process
         assert wait_gone({child.pid: ticks - 1}, timeout_s=0.0) == []
-        assert cmdline(child.pid).endswith(" -c import sys; sys.stdin.read() ")
+        assert cmdline(child.pid).endswith(f" -c {program} ")
         assert wait_gone({child.pid: ticks}, timeout_s=0.0) == [f"{child.pid} {cmdline(child.pid)[:80]}"]
     finally:
         child.communicate(timeout=60)
