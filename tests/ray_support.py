@@ -27,15 +27,22 @@ DRIVER_HANG_S = 600.0
 WORKERS_UP_S = 300.0
 
 
+def _stat_field(pid: int | str, number: int) -> int | None:
+    """Field `number` (1-based, as proc(5) counts them; 4 or above) of /proc/PID/stat; None when it is gone.
+    Split after the command's closing parenthesis, which may itself hold spaces."""
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[number - 3])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def descendants(pid: int) -> set[int]:
     children: dict[int, list[int]] = {}
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
-            try:
-                parent = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(parent, []).append(int(entry.name))
+            parent = _stat_field(entry.name, 4)
+            if parent is not None:
+                children.setdefault(parent, []).append(int(entry.name))
     found, stack = set(), [pid]
     while stack:
         for child in children.get(stack.pop(), []):
@@ -46,10 +53,7 @@ def descendants(pid: int) -> set[int]:
 
 def started_ticks(pid: int) -> int | None:
     """When process `pid` started (clock ticks since boot; /proc/PID/stat field 22), None when it is gone."""
-    try:
-        return int((Path(f"/proc/{pid}") / "stat").read_text().rsplit(")", 1)[1].split()[19])
-    except (OSError, IndexError, ValueError):
-        return None
+    return _stat_field(pid, 22)
 
 
 def alive(pid: int, started: int | None = None) -> bool:
@@ -74,9 +78,14 @@ def cmdline(pid: int) -> str:
 def ray_processes(pid: int) -> dict[int, int]:
     """Ray's processes under `pid`: its servers (from Ray's package) and its workers ("ray::..."), each pid
     with the ticks it started at (`alive`)."""
-    found = {child: started_ticks(child) for child in descendants(pid)
-             if "site-packages/ray/" in cmdline(child) or cmdline(child).startswith("ray::")}
-    return {child: ticks for child, ticks in found.items() if ticks is not None}
+    found = {}
+    for child in descendants(pid):
+        # The start time first: a pid given to another process after it was read then counts as gone (the Ray
+        # process that had it is), where one read after the command line could be the newcomer's.
+        ticks, command = started_ticks(child), cmdline(child)
+        if ticks is not None and ("site-packages/ray/" in command or command.startswith("ray::")):
+            found[child] = ticks
+    return found
 
 
 def wait_gone(processes: dict[int, int], timeout_s: float = 60.0) -> list[str]:
