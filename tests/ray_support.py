@@ -17,6 +17,7 @@ from preland_app.campaign.executors.ray import start_local_ray
 from preland_app.runtime.sitl import SITL_ENV
 
 from .conftest import ROOT
+from .procs import alive, cmdline, descendants, started_ticks
 from .waiting import until
 
 NODE_SITL = "/bin/false"  # the SITL binary the Ray node advertises: one that exits before its vehicle answers
@@ -25,54 +26,6 @@ NODE_SITL = "/bin/false"  # the SITL binary the Ray node advertises: one that ex
 DRIVER_HANG_S = 600.0
 # How long the module's instance may take to have its workers up (a bound for one that never does).
 WORKERS_UP_S = 300.0
-
-
-def _stat_field(pid: int | str, number: int) -> int | None:
-    """Field `number` (1-based, as proc(5) counts them; 4 or above) of /proc/PID/stat; None when it is gone.
-    Split after the command's closing parenthesis, which may itself hold spaces."""
-    try:
-        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[number - 3])
-    except (OSError, IndexError, ValueError):
-        return None
-
-
-def descendants(pid: int) -> set[int]:
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            parent = _stat_field(entry.name, 4)
-            if parent is not None:
-                children.setdefault(parent, []).append(int(entry.name))
-    found, stack = set(), [pid]
-    while stack:
-        for child in children.get(stack.pop(), []):
-            found.add(child)
-            stack.append(child)
-    return found
-
-
-def started_ticks(pid: int) -> int | None:
-    """When process `pid` started (clock ticks since boot; /proc/PID/stat field 22), None when it is gone."""
-    return _stat_field(pid, 22)
-
-
-def alive(pid: int, started: int | None = None) -> bool:
-    """Whether `pid` runs (a zombie does not), and is still the process that started at `started` ticks: on a
-    machine that starts thousands of processes and threads a minute, Linux gives a gone process's pid to
-    another within seconds (pid_max is 32768 on 2 cores)."""
-    try:
-        if "State:\tZ" in Path(f"/proc/{pid}/status").read_text():
-            return False
-    except OSError:
-        return False
-    return started is None or started_ticks(pid) == started
-
-
-def cmdline(pid: int) -> str:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return ""
 
 
 def ray_processes(pid: int) -> dict[int, int]:

@@ -22,8 +22,9 @@ from preland_app.campaign.spec import load_campaign
 from preland_app.campaign.store import DuplicateTrial, ResultsStore, TrialRecord
 from preland_app.cli import app
 
-from .waiting import until
 from .conftest import ROOT
+from .procs import alive, children, identified
+from .waiting import until
 
 MISSION = ROOT / "missions" / "thesis_square_land.yaml"
 COMPARED = ("scenario", "trial_index", "seed", "outcome", "message", "landing_error_cm", "offset_north_cm",
@@ -150,19 +151,6 @@ def test_resume_refuses_a_changed_scenario(tmp_path, quick_run):
             run_campaign(load_campaign(path), store, workers=1, resume=True)
 
 
-def _children(pid: int) -> list[int]:
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-                found.append(int(entry.name))
-    return found
-
-
 @pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc to find worker processes")
 def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
     body = QUICK.replace("trials: 3", "trials: 6")
@@ -173,9 +161,9 @@ def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
     process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
     stored = 0
-    workers: list[int] = []
+    workers: dict[int, int] = {}  # pid: the tick it started at (a pid Linux gives another since is not one)
     while time.monotonic() < deadline:
-        workers = workers or _children(process.pid)
+        workers = workers or identified(children(process.pid))
         if db.exists():
             try:
                 with sqlite3.connect(db) as connection:
@@ -185,19 +173,13 @@ def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
         if stored >= 3:
             break
         time.sleep(0.05)
-    workers = sorted(set(workers) | set(_children(process.pid)))  # a worker started since is one too
+    workers |= identified(children(process.pid))  # a worker started since is one too
     os.kill(process.pid, signal.SIGKILL)
     process.wait(timeout=10)
     assert 3 <= stored < 12, "the campaign should be killed part way"
 
-    def living(pid: int) -> bool:
-        try:
-            return "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()
-        except OSError:  # gone, or going while read
-            return False
-
     def orphans() -> list[int]:
-        return [pid for pid in workers if living(pid)]
+        return [pid for pid, started in workers.items() if alive(pid, started)]
 
     # The workers notice their parent has gone and exit: bounded, not a fixed sleep.
     until(lambda: not orphans(), timeout_s=30, what="the orphaned workers to exit")

@@ -23,8 +23,9 @@ from preland_app.cli import app
 from preland_app.runtime.sitl import SITL_ENV, SitlOptions, SitlRuntime
 
 from .conftest import ROOT
-from .ray_support import (NODE_SITL, alive, cluster, cmdline, descendants, driver_process,  # noqa: F401 (cluster)
-                          finished, ray_processes, started_ticks, wait_gone, wait_stored)
+from .procs import alive, cmdline, descendants, started_ticks
+from .ray_support import (NODE_SITL, cluster, driver_process, finished, ray_processes,  # noqa: F401 (cluster)
+                          wait_gone, wait_stored)
 from .test_campaign import QUICK, comparable, write_campaign
 from .tools.terminal import as_from_a_terminal
 

@@ -49,6 +49,7 @@ import yaml
 from preland_app.runtime.sitl import SITL_ENV
 
 from .conftest import ROOT
+from .procs import alive
 
 TUTORIALS = ROOT / "docs" / "tutorials"
 PAGES = ["index.md", "first-mission.md", "first-campaign.md", "own-land-mode.md", "sitl.md", "field-trial.md"]
@@ -396,10 +397,9 @@ def check_sitl(run: Run, text: str) -> None:
     assert (run.cwd / "flight.tlog").stat().st_size > 10_000
     report_files(run.cwd / "sitl-report", "sitl_first")
     if not os.environ.get(SITL_ENV):  # every stand-in launched was stopped
-        launched = [json.loads(p.read_text())["pid"] for p in run.launches.glob("*.json")]
+        launched = [json.loads(p.read_text()) for p in run.launches.glob("*.json")]
         assert len(launched) >= 3
-        assert not [pid for pid in launched if Path(f"/proc/{pid}").exists()
-                    and "State:\tZ" not in Path(f"/proc/{pid}/status").read_text()]
+        assert not [launch for launch in launched if alive(launch["pid"], launch["started"])]
 
 
 def check_field_trial(run: Run, text: str) -> None:

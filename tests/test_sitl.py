@@ -22,6 +22,7 @@ from preland_app.runtime.sitl_parm import read_parm_file
 from preland_app.vehicle.lockstep_clock import MISSION_START_S
 
 from .conftest import ROOT, THESIS_MISSION
+from .procs import alive, cmdline
 from .tools.fake_sitl import FRAME_RATE_HZ
 from .tools.terminal import as_from_a_terminal
 from .waiting import until
@@ -48,12 +49,9 @@ def _launches(logs: Path) -> list[dict]:
     return [json.loads(p.read_text()) for p in sorted(logs.glob("*.json"))]
 
 
-def _alive(pid: int) -> bool:
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return False
-    return "State:\tZ" not in status
+def _running(launch: dict) -> bool:
+    """Whether the stand-in `launch` tells of still runs (its pid, given to no other process since)."""
+    return alive(launch["pid"], launch["started"])
 
 
 def test_a_trial_on_sitl_launches_a_fresh_instance_and_stops_it(fake_sitl, thesis_mission, tmp_path):
@@ -80,7 +78,7 @@ def test_a_trial_on_sitl_launches_a_fresh_instance_and_stops_it(fake_sitl, thesi
     assert argv[argv.index("--serial0") + 1].startswith("udpclient:127.0.0.1:")
     assert argv[argv.index("--model") + 1] == "+" and "--sim-port-out" not in argv
     assert outcome.details["sitl_physics"] == "ardupilot"
-    assert not _alive(launch["pid"])
+    assert not _running(launch)
     # The trial's telemetry log reads back with pymavlink's tools.
     log = mavutil.mavlink_connection(str(tmp_path / "tlogs" / "trial.tlog"))
     types = set()
@@ -142,9 +140,9 @@ def _wait_for_launch(logs: Path, timeout_s: float = 30.0) -> dict:
 
 def _wait_airborne(logs: Path, launch: dict, timeout_s: float = 120.0) -> None:
     """Until the stand-in's vehicle is in the air (its PID.airborne file), however loaded the machine is."""
-    until(lambda: (logs / f"{launch['pid']}.airborne").exists() or not _alive(launch["pid"]), timeout_s=timeout_s,
+    until(lambda: (logs / f"{launch['pid']}.airborne").exists() or not _running(launch), timeout_s=timeout_s,
           what="the stand-in's vehicle to be airborne")
-    assert _alive(launch["pid"]), "the stand-in ended before its vehicle was airborne"
+    assert _running(launch), "the stand-in ended before its vehicle was airborne"
 
 
 def _bridge_threads() -> list[str]:
@@ -160,14 +158,11 @@ def _children() -> list[int]:
             pids += [int(pid) for pid in (task / "children").read_text().split()]
         except (FileNotFoundError, ProcessLookupError):
             continue  # a thread that ended since the listing (a bridge's, a MAVSDK call's) has no children
-    return [pid for pid in pids if _alive(pid) and _is_sitl(pid)]
+    return [pid for pid in pids if alive(pid) and _is_sitl(pid)]
 
 
 def _is_sitl(pid: int) -> bool:
-    try:
-        command = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return False
+    command = cmdline(pid)
     return "fake_sitl.py" in command or "arducopter" in command
 
 
@@ -177,8 +172,8 @@ def _answers(logs: Path, launch: dict) -> int:
     return int(noted.read_text()) if noted.exists() else 0
 
 
-def _wait_dead(pid: int, timeout_s: float = 30.0) -> None:
-    until(lambda: not _alive(pid), timeout_s=timeout_s, what=f"SITL process {pid} to end")
+def _wait_dead(launch: dict, timeout_s: float = 30.0) -> None:
+    until(lambda: not _running(launch), timeout_s=timeout_s, what=f"SITL process {launch['pid']} to end")
 
 
 @pytest.mark.parametrize("physics", ["ardupilot", "preland"])
@@ -370,7 +365,7 @@ def test_a_trial_on_preland_physics_runs_sitl_on_the_json_bridge(fake_sitl, thes
     # SITL takes its SIGTERM at its next step: the physics the companion held at the trial's end was let go
     # for it, so it exited on its own (not killed after the grace).
     assert (logs / f"{launch['pid']}.exit").read_text() == "SIGTERM\n"
-    assert not _alive(launch["pid"]) and _children() == []
+    assert not _running(launch) and _children() == []
     assert _bridge_threads() == []
 
 

@@ -15,7 +15,7 @@ from preland_app.runtime.embedded import TrialRequest
 from preland_app.runtime.sitl import SitlOptions, run_sitl_trial
 
 from .conftest import ROOT, THESIS_MISSION
-from .test_sitl import (_alive, _answers, _bridge_threads, _launches, _run_in_thread, _wait_airborne,
+from .test_sitl import (_answers, _bridge_threads, _launches, _run_in_thread, _running, _wait_airborne,
                         _wait_dead, _wait_for_launch, fake_sitl)
 from .tools.terminal import as_from_a_terminal
 from .waiting import until
@@ -41,7 +41,7 @@ def test_an_interrupted_sitl_campaign_leaves_no_sitl_process(fake_sitl, tmp_path
     _, stderr = process.communicate(timeout=30)
     assert process.returncode == 130, stderr
     for launch in _launches(logs):
-        _wait_dead(launch["pid"])
+        _wait_dead(launch)
 
 
 def _signalled_in_flight(script, logs, mission, *, physics: str, signal_number: int) -> tuple:
@@ -69,7 +69,7 @@ def test_sitl_killed_mid_trial_ends_the_trial_as_error_naming_the_exit(fake_sitl
     assert outcome.outcome is Outcome.ERROR
     assert "killed by SIGKILL" in outcome.message and "SitlExited" in outcome.message
     assert any(e.kind == "armed" for e in outcome.events)  # what it recorded before is kept
-    assert not _alive(launch["pid"])
+    assert not _running(launch)
     assert _bridge_threads() == []  # the bridge stopped with its trial
     if physics == "preland":
         assert _answers(logs, launch) > 0
@@ -85,7 +85,7 @@ def test_sitl_that_stops_answering_ends_as_link_lost_in_bounded_time(fake_sitl, 
                                                       signal_number=signal.SIGSTOP)
     assert outcome.outcome is Outcome.LINK_LOST, outcome.message
     assert elapsed_s < 20.0
-    _wait_dead(launch["pid"])
+    _wait_dead(launch)
     assert _bridge_threads() == []
 
 

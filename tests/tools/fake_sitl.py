@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """A stand-in for ArduPilot's `arducopter` SITL binary, for tests: it takes SITL's command line and serves
-preland's embedded simulator over MAVLink to the --serial0 udpclient address. It writes its pid and
-arguments to $FAKE_SITL_LOG_DIR (when set) so tests can check what was launched and that it is gone, and a
-PID.airborne file there once the vehicle is in the air.
+preland's embedded simulator over MAVLink to the --serial0 udpclient address. It writes its pid, the tick it
+started at and its arguments to $FAKE_SITL_LOG_DIR (when set) so tests can check what was launched and that
+it is gone (tests/procs.py), and a PID.airborne file there once the vehicle is in the air.
 
 With `--model JSON:HOST` it also acts as SITL on its JSON interface: servo packets (a constant PWM just
 below the quad X's hover, so the physics stays on the ground) to HOST at `--sim-port-out` (else 9002 +
@@ -54,6 +54,7 @@ from preland_app.sim.params import ARDUCOPTER_PARAMS  # noqa: E402
 from preland_app.sim.simulator import Simulator  # noqa: E402
 from preland_app.sim.multirotor import QuadXFrame  # noqa: E402
 from preland_app.sim.sitl_json import DEFAULT_PORT, build_servo_packet  # noqa: E402
+from tests.procs import started_ticks  # noqa: E402
 
 
 # SITL's own parameters that preland writes during a flight (libraries/SITL/SITL.cpp, 4.6: AP_Vector3f,
@@ -196,7 +197,8 @@ class SitlFace(MavlinkFace):
 def main(args: argparse.Namespace) -> None:
     log_dir = os.environ.get("FAKE_SITL_LOG_DIR")
     if log_dir:
-        _write_whole(Path(log_dir, f"{os.getpid()}.json"), json.dumps({"pid": os.getpid(), "argv": sys.argv[1:]}))
+        launch = {"pid": os.getpid(), "started": started_ticks(), "argv": sys.argv[1:]}
+        _write_whole(Path(log_dir, f"{os.getpid()}.json"), json.dumps(launch))
     # ArduPilot reads every defaults file, later ones winning; the simulator models only some parameters,
     # the others (compass offsets, RC calibration, SIM_*) are taken and ignored, as SITL would use them.
     given = {}
