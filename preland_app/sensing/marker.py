@@ -241,8 +241,12 @@ class TrackingMarkerDetector(MarkerDetector):
     every `full_frame_every` frames so that markers coming into view elsewhere
     are not missed. In the window, the detector keeps the whole frame's marker
     size limits in pixels (OpenCV states them relative to the image searched),
-    so a window finds what the whole frame would find there. Given a virtual
-    camera's frame (`detect_frame`), only the window is drawn.
+    so a window finds what the whole frame would find there, but for markers of
+    a few pixels a cell: whether OpenCV reads the bits of a candidate outline
+    can depend on where the marker lies in the image searched, and a window may
+    then keep another outline of the same marker, a pixel apart before corner
+    refinement. Given a virtual camera's frame (`detect_frame`), only the window
+    is drawn.
     """
 
     def __init__(self, *, pad: PadSpec, camera: CameraModel, parameters: cv2.aruco.DetectorParameters | None = None,
