@@ -40,7 +40,7 @@ def cmdline(pid: int) -> str:
         return ""
 
 
-def _parents() -> dict[int, list[int]]:
+def _children_by_parent() -> dict[int, list[int]]:
     children: dict[int, list[int]] = {}
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
@@ -52,12 +52,12 @@ def _parents() -> dict[int, list[int]]:
 
 def children(pid: int) -> list[int]:
     """The processes whose parent is `pid`."""
-    return sorted(_parents().get(pid, []))
+    return sorted(_children_by_parent().get(pid, []))
 
 
 def descendants(pid: int) -> set[int]:
     """The processes under `pid`, at any depth."""
-    tree = _parents()
+    tree = _children_by_parent()
     found, stack = set(), [pid]
     while stack:
         for child in tree.get(stack.pop(), []):

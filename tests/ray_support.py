@@ -17,7 +17,7 @@ from preland_app.campaign.executors.ray import start_local_ray
 from preland_app.runtime.sitl import SITL_ENV
 
 from .conftest import ROOT
-from .procs import alive, cmdline, descendants, started_ticks
+from .procs import alive, cmdline, descendants, identified
 from .waiting import until
 
 NODE_SITL = "/bin/false"  # the SITL binary the Ray node advertises: one that exits before its vehicle answers
@@ -31,14 +31,11 @@ WORKERS_UP_S = 300.0
 def ray_processes(pid: int) -> dict[int, int]:
     """Ray's processes under `pid`: its servers (from Ray's package) and its workers ("ray::..."), each pid
     with the ticks it started at (`alive`)."""
-    found = {}
-    for child in descendants(pid):
-        # The start time first: a pid given to another process after it was read then counts as gone (the Ray
-        # process that had it is), where one read after the command line could be the newcomer's.
-        ticks, command = started_ticks(child), cmdline(child)
-        if ticks is not None and ("site-packages/ray/" in command or command.startswith("ray::")):
-            found[child] = ticks
-    return found
+    # The start time first (`identified`), then the command line: a pid given to another process in between
+    # then counts as gone (the Ray process that had it is), where one read after the command line could be
+    # the newcomer's.
+    return {child: ticks for child, ticks in identified(descendants(pid)).items()
+            if "site-packages/ray/" in (command := cmdline(child)) or command.startswith("ray::")}
 
 
 def wait_gone(processes: dict[int, int], timeout_s: float = 60.0) -> list[str]:

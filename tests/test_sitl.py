@@ -22,7 +22,7 @@ from preland_app.runtime.sitl_parm import read_parm_file
 from preland_app.vehicle.lockstep_clock import MISSION_START_S
 
 from .conftest import ROOT, THESIS_MISSION
-from .procs import alive, cmdline
+from .procs import alive, children, cmdline
 from .tools.fake_sitl import FRAME_RATE_HZ
 from .tools.terminal import as_from_a_terminal
 from .waiting import until
@@ -152,13 +152,7 @@ def _bridge_threads() -> list[str]:
 def _children() -> list[int]:
     """The pids of this process's living SITL children, stand-in or real (a zombie not yet reaped is not
     one; children of other tests sharing the worker, such as a served simulator's tools, are not either)."""
-    pids = []
-    for task in Path("/proc/self/task").iterdir():
-        try:
-            pids += [int(pid) for pid in (task / "children").read_text().split()]
-        except (FileNotFoundError, ProcessLookupError):
-            continue  # a thread that ended since the listing (a bridge's, a MAVSDK call's) has no children
-    return [pid for pid in pids if alive(pid) and _is_sitl(pid)]
+    return [pid for pid in children(os.getpid()) if alive(pid) and _is_sitl(pid)]
 
 
 def _is_sitl(pid: int) -> bool:
