@@ -510,16 +510,22 @@ def test_normal_landings_on_real_sitl_miss_by_the_seeds_gps_error(thesis_mission
 @needs_real_sitl
 def test_the_table5_pair_on_real_sitl(thesis_mission):
     """Cautious against default with the marker lost below 3 m on the first attempt, over five seeds: on
-    one seed a blind descent can land as close as a cautious one (seed 2: 7.1 against 8.1 cm), so the
-    comparison is of the means, as the thesis' is."""
+    one seed a blind descent can land closer than a cautious one (seed 5: 1.7 against 6.1 cm), so the
+    comparison is of the means, as the thesis' is.
+
+    On preland's physics in lock-step (SITL's JSON interface): every camera frame is read at its own vehicle
+    time however busy the machine is. On SITL's own physics at 10x the companion renders and detects in wall
+    time, and four such flights at once on 2 cores (`pytest -n 4`) made a cautious landing lose the marker on
+    its second attempt too (three attempts)."""
     faults = {"marker": "below:3:first-attempt"}
+    lockstep = _real(physics="preland", speedup=None)
     defaults, cautious = [], []
     for seed in range(1, 6):
         defaults.append(run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed, land_mode="marker",
-                                                    faults=faults, takeoff_altitude_rel_m=6.0), options=_real()))
+                                                    faults=faults, takeoff_altitude_rel_m=6.0), options=lockstep))
         cautious.append(run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed, land_mode="cautious",
                                                     sensor="marker", faults=faults, takeoff_altitude_rel_m=6.0),
-                                       options=_real()))
+                                       options=lockstep))
     for default, careful in zip(defaults, cautious):
         assert default.outcome is careful.outcome is Outcome.LANDED, (default.message, careful.message)
         assert careful.details["attempts"] == 2 and careful.details["marker_dropped"] > 0
