@@ -518,7 +518,7 @@ def test_the_table5_pair_on_real_sitl(thesis_mission):
     time, and four such flights at once on 2 cores (`pytest -n 4`) made a cautious landing lose the marker on
     its second attempt too (three attempts)."""
     faults = {"marker": "below:3:first-attempt"}
-    lockstep = _real(physics="preland", speedup=None)
+    lockstep = SitlOptions(binary=Path(REAL_SITL), physics="preland")  # the lock-step speed-up
     defaults, cautious = [], []
     for seed in range(1, 6):
         defaults.append(run_sitl_trial(TrialRequest(mission=thesis_mission, seed=seed, land_mode="marker",
