@@ -23,7 +23,7 @@ from preland_app.campaign.store import DuplicateTrial, ResultsStore, TrialRecord
 from preland_app.cli import app
 
 from .conftest import ROOT
-from .procs import alive, children, identified
+from .procs import alive, descendants, identified
 from .waiting import until
 
 MISSION = ROOT / "missions" / "thesis_square_land.yaml"
@@ -163,7 +163,7 @@ def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
     stored = 0
     workers: dict[int, int] = {}  # pid: the tick it started at (a pid Linux gives another since is not one)
     while time.monotonic() < deadline:
-        workers = workers or identified(children(process.pid))
+        workers = workers or identified(descendants(process.pid))  # the fork server and the workers it forked
         if db.exists():
             try:
                 with sqlite3.connect(db) as connection:
@@ -173,7 +173,7 @@ def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
         if stored >= 3:
             break
         time.sleep(0.05)
-    workers |= identified(children(process.pid))  # a worker started since is one too
+    workers |= identified(descendants(process.pid))  # a worker started since is one too
     os.kill(process.pid, signal.SIGKILL)
     process.wait(timeout=10)
     assert 3 <= stored < 12, "the campaign should be killed part way"
@@ -196,16 +196,51 @@ def test_a_killed_campaign_resumes_to_the_same_results(tmp_path):
 
 def test_a_worker_whose_campaign_died_while_it_started_exits_instead_of_waiting_for_ever():
     """A worker asks to die with the campaign process as it starts; one whose campaign was killed before it
-    asked (the signal then never comes) exits by itself, and one whose campaign lives goes on."""
+    asked (the signal then never comes) exits by itself, and one whose campaign lives goes on: spawned by the
+    campaign, or forked by a fork server the campaign started."""
     code = ("import sys\nfrom preland_app.campaign.executors.local import _worker_init\n"
             "_worker_init(int(sys.argv[1]))\nprint('went on')\n")
     alive = subprocess.run([sys.executable, "-c", code, str(os.getpid())], cwd=ROOT, capture_output=True,
                            text=True, timeout=120)
     assert (alive.returncode, alive.stdout) == (0, "went on\n"), alive.stderr
-    # The pid the worker was started for is not its parent's: that campaign is gone.
+    # A grandchild, as a worker of the fork server is.
+    server = ("import subprocess, sys\n"
+              "result = subprocess.run([sys.executable, '-c', sys.argv[1], sys.argv[2]], capture_output=True, "
+              "text=True, timeout=120)\nprint(result.returncode, result.stdout.strip())\n")
+    forked = subprocess.run([sys.executable, "-c", server, code, str(os.getpid())], cwd=ROOT,
+                            capture_output=True, text=True, timeout=240)
+    assert (forked.returncode, forked.stdout) == (0, "0 went on\n"), forked.stderr
+    # The pid the worker was started for is neither its parent's nor its grandparent's: that campaign is gone.
     orphaned = subprocess.run([sys.executable, "-c", code, str(os.getpid() + 1)], cwd=ROOT, capture_output=True,
                               text=True, timeout=120)
     assert (orphaned.returncode, orphaned.stdout) == (1, ""), orphaned.stderr
+
+
+def test_a_pool_forks_its_workers_from_a_server_with_the_campaigns_environment_of_the_moment(monkeypatch):
+    """The local executor's workers are forked by a fork server this process started (their grandparent),
+    which has imported what a trial needs; each pool's workers see the environment the campaign process had
+    when the pool started, not the one the server was started with."""
+    from preland_app.campaign.executors.base import ExecutorOptions
+    from preland_app.campaign.executors.local import LocalExecutor, _parent_pid
+
+    seen = []
+    for value in ("first", "second"):
+        monkeypatch.setenv("PRELAND_WORKER_PROBE", value)
+        executor = LocalExecutor(ExecutorOptions(workers=2))
+        executor.start()
+        try:
+            pool = executor._pool
+            parent = pool.submit(os.getppid).result(timeout=120)
+            seen.append((pool.submit(os.getenv, "PRELAND_WORKER_PROBE").result(timeout=120),
+                         parent != os.getpid(), _parent_pid(parent) == os.getpid(),
+                         "preland_app.campaign.trials" in pool.submit(_modules_loaded).result(timeout=120)))
+        finally:
+            executor.close()
+    assert seen == [("first", True, True, True), ("second", True, True, True)]
+
+
+def _modules_loaded() -> list[str]:
+    return sorted(sys.modules)
 
 
 BAD = {
