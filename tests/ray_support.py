@@ -29,13 +29,20 @@ WORKERS_UP_S = 300.0
 
 
 def ray_processes(pid: int) -> dict[int, int]:
-    """Ray's processes under `pid`: its servers (from Ray's package) and its workers ("ray::..."), each pid
-    with the ticks it started at (`alive`)."""
+    """Ray's processes under `pid`: its servers (a program or script of Ray's package) and its workers
+    ("ray::..."), each pid with the ticks it started at (`alive`)."""
     # The start time first (`identified`), then the command line: a pid given to another process in between
     # then counts as gone (the Ray process that had it is), where one read after the command line could be
     # the newcomer's.
     return {child: ticks for child, ticks in identified(descendants(pid)).items()
-            if "site-packages/ray/" in (command := cmdline(child)) or command.startswith("ray::")}
+            if _is_ray(cmdline(child))}
+
+
+def _is_ray(command: str) -> bool:
+    """A Ray server runs a program of Ray's package, or Python on a script of it (`python -u .../agent.py`):
+    the path is in the first words. Further on, Ray's folder is only an argument: the local executor's fork
+    server, started after Ray was imported, is given a sys.path that holds Ray's `thirdparty_files`."""
+    return command.startswith("ray::") or any("site-packages/ray/" in word for word in command.split(" ")[:3])
 
 
 def wait_gone(processes: dict[int, int], timeout_s: float = 60.0) -> list[str]:
