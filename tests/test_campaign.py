@@ -233,14 +233,10 @@ def test_a_pool_forks_its_workers_from_a_server_with_the_campaigns_environment_o
             parent = pool.submit(os.getppid).result(timeout=120)
             seen.append((pool.submit(os.getenv, "PRELAND_WORKER_PROBE").result(timeout=120),
                          parent != os.getpid(), _parent_pid(parent) == os.getpid(),
-                         "preland_app.campaign.trials" in pool.submit(_modules_loaded).result(timeout=120)))
+                         "/cv2" in Path(f"/proc/{parent}/maps").read_text()))  # the server has OpenCV loaded
         finally:
             executor.close()
     assert seen == [("first", True, True, True), ("second", True, True, True)]
-
-
-def _modules_loaded() -> list[str]:
-    return sorted(sys.modules)
 
 
 BAD = {

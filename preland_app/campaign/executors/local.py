@@ -6,8 +6,10 @@ worker. A worker then starts in milliseconds instead of importing numpy, OpenCV 
 preland again (about 0.4 CPU s each as a spawned process), and still inherits no
 state of the driver: nothing leaks between campaigns. Each worker takes the
 driver's environment of the moment its pool starts, as a spawned one would. Workers
-ignore Ctrl-C (the driver handles it) and die with the driver (PR_SET_PDEATHSIG on
-the fork server, which ends when the driver does). A worker that dies
+ignore Ctrl-C (the driver handles it) and exit when the driver does, even when it is
+killed: each watches the driver's process (a pidfd), and asks for SIGKILL when its
+parent ends (PR_SET_PDEATHSIG). The fork server ends once the driver and every
+worker have. Elsewhere (no fork server, no /proc) workers are spawned. A worker that dies
 breaks the whole pool: every trial then in flight is run again in a new pool,
 and one that was in flight at two such deaths is recorded as an error. With one
 worker, trials run in the driver's own process, one per `completed` call, with
