@@ -132,7 +132,7 @@ def overlay_venv(folder: Path) -> Path:
     (own / "_preland_docs_overlay.pth").write_text(f"import site; site.addsitedir({shared!r})\n")
     (bin_dir / "pip").write_text(f'#!/bin/sh\nexec {shlex.quote(str(python))} -m pip "$@"\n')
     (bin_dir / "preland").write_text(f"#!{python}\nimport sys\nfrom preland_app.cli.app import main\n\n"
-                                     "if __name__ == '__main__':  # spawned campaign workers import this file\n"
+                                     "if __name__ == '__main__':  # campaign workers import this file\n"
                                      "    sys.exit(main())\n")
     for script in ("pip", "preland"):
         (bin_dir / script).chmod(0o755)

@@ -91,7 +91,7 @@ class NotAStrategy:
 
 @pytest.fixture(scope="module")
 def plugins(tmp_path_factory):
-    """A plugin module on sys.path (spawned campaign workers get the parent's sys.path)."""
+    """A plugin module on sys.path (campaign workers get the parent's sys.path as it is when they start)."""
     folder = tmp_path_factory.mktemp("plugins")
     (folder / f"{MODULE}.py").write_text(PLUGINS)
     (folder / "preland_broken_plugin.py").write_text("RATE = 1 / 0\n")
