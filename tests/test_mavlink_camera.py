@@ -21,13 +21,20 @@ def test_camera_land_modes_over_mavlink(short_mission, mode, faults):
     # thesis mission made short (from 5 m): the camera's work is the landing's.
     outcome, served = fly_paced(short_mission, seed=4, land_mode=mode, faults=faults)
     assert outcome.outcome is Outcome.LANDED, outcome.message
-    assert outcome.landing_error_cm < 15.0, (outcome.events, outcome.details)
+    assert outcome.landing_error_cm < 15.0, told(outcome)
     assert served.face.landing_targets == outcome.details["landing_targets_sent"] > 100
     # Every frame at its vehicle time: the camera's 15 frames a second of the landing, none waited for truth.
     assert outcome.details["ticks_without_new_truth"] <= 1
     assert outcome.details["marker_frames"] >= 0.9 * 15 * outcome.landing_time_s
     if mode == "cautious":
         assert outcome.details["attempts"] == 2 and outcome.details["marker_dropped"] > 0
+
+
+def told(outcome) -> str:
+    """A trial's events and details in full, one event a line (a repr of them would be cut short)."""
+    return "\n".join([f"landed {outcome.landing_error_cm:.1f} cm off; details {outcome.details}",
+                      *(f"{event.time_s:8.2f} {event.kind}: {event.message} {event.data}"
+                        for event in outcome.events)])
 
 
 def test_the_same_seed_flies_the_same_trial_in_lock_step(short_mission):
