@@ -58,7 +58,7 @@ def test_paper_algorithms_over_mavlink(mode):
     mission = load_mission(SHORT_PAPER_MISSION)
     outcome, _ = fly_paced(mission, seed=2, land_mode=mode)
     assert outcome.outcome is Outcome.LANDED, outcome.message
-    assert outcome.landing_error_cm < 20.0 and not outcome.details["aborted_to_gps"]
+    assert outcome.landing_error_cm < 20.0 and not outcome.details["aborted_to_gps"], told(outcome)
     # Both markers steered, the 18 cm one (id 1) last; Algorithm 2 chose the 56 cm one (id 0) first and switched
     # once, never back, where Algorithm 1 takes whichever is the highest id in view.
     chosen = [event.data["to_id"] for event in outcome.events if event.kind == "marker_switch"]
