@@ -221,7 +221,8 @@ def test_a_pool_forks_its_workers_from_a_server_with_the_campaigns_environment_o
     which has imported what a trial needs; each pool's workers see the environment the campaign process had
     when the pool started, not the one the server was started with."""
     from preland_app.campaign.executors.base import ExecutorOptions
-    from preland_app.campaign.executors.local import LocalExecutor, _parent_pid
+    from preland_app.campaign.executors.local import LocalExecutor
+    from preland_app.campaign.lease import parent_pid
 
     seen = []
     for value in ("first", "second"):
@@ -232,7 +233,7 @@ def test_a_pool_forks_its_workers_from_a_server_with_the_campaigns_environment_o
             pool = executor._pool
             parent = pool.submit(os.getppid).result(timeout=120)
             seen.append((pool.submit(os.getenv, "PRELAND_WORKER_PROBE").result(timeout=120),
-                         parent != os.getpid(), _parent_pid(parent) == os.getpid(),
+                         parent != os.getpid(), parent_pid(parent) == os.getpid(),
                          "/cv2" in Path(f"/proc/{parent}/maps").read_text()))  # the server has OpenCV loaded
         finally:
             executor.close()

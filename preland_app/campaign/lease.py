@@ -43,15 +43,26 @@ class CampaignBusy(StoreError):
     """Another driver is running this campaign on this store."""
 
 
+def _stat_fields(pid: int) -> list[str] | None:
+    """/proc/PID/stat's fields after the command (field 3, the state, first), None where it cannot be read.
+    Split after the command's closing parenthesis, which may itself hold spaces."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+
+
 def process_start(pid: int) -> str:
     """When process `pid` started (clock ticks since boot, from /proc), or '' where that cannot be read.
     With the pid it tells a driver apart from a later process that got the same pid."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return ""
-    fields = stat.rsplit(")", 1)[1].split()
-    return "" if fields[0] == "Z" else fields[19]
+    fields = _stat_fields(pid)
+    return "" if not fields or fields[0] == "Z" else fields[19]
+
+
+def parent_pid(pid: int) -> int | None:
+    """The parent of process `pid` (from /proc), None where that cannot be read."""
+    fields = _stat_fields(pid)
+    return int(fields[1]) if fields else None
 
 
 def _running(pid: int, started: str) -> bool:

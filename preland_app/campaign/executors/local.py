@@ -28,6 +28,7 @@ from collections import deque
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
+from ..lease import parent_pid
 from ..store import TrialRecord
 from ..trials import TrialJob, error_record, run_job
 from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, ExecutorOptions, TrialExecutor
@@ -36,15 +37,6 @@ from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, Exec
 # What a worker imports to fly a trial, imported once by the fork server instead of by every worker; with
 # `__main__`, the driver's main script (a worker imports it to unpickle what it defines, as a spawned one does).
 FORK_SERVER_PRELOAD = ("__main__", "preland_app.campaign.trials", "cv2")
-
-
-def _parent_pid(pid: int) -> int | None:
-    """The parent of `pid` (/proc/PID/stat, field 4), None when it is gone or there is no /proc."""
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as stat:
-            return int(stat.read().rsplit(b")", 1)[1].split()[1])
-    except (OSError, IndexError, ValueError):
-        return None
 
 
 def _worker_init(campaign_pid: int, environment: dict[str, str] | None = None) -> None:
@@ -66,7 +58,7 @@ def _worker_init(campaign_pid: int, environment: dict[str, str] | None = None) -
         campaign = None  # no pidfd (not Linux, or older than 5.3): the parent's signal alone
     parent = os.getppid()
     # The campaign process is the parent (a spawned worker) or the fork server's parent (a forked one).
-    if campaign_pid not in (parent, _parent_pid(parent)):
+    if campaign_pid not in (parent, parent_pid(parent)):
         # The campaign died while this worker started, before the signal was asked for, which then never
         # comes; and the worker, holding its own end of the call queue, would wait on it for ever.
         os._exit(1)
