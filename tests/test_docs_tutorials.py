@@ -35,7 +35,6 @@ import re
 import shlex
 import shutil
 import signal
-import socket
 import sqlite3
 import subprocess
 import sys
@@ -49,6 +48,7 @@ import yaml
 from preland_app.runtime.sitl import SITL_ENV
 
 from .conftest import ROOT
+from .ports import free_udp_port
 from .procs import alive
 
 TUTORIALS = ROOT / "docs" / "tutorials"
@@ -151,10 +151,6 @@ def sitl_binary(folder: Path) -> Path:
     return wrapper
 
 
-def free_udp_port() -> str:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return str(probe.getsockname()[1])
 
 
 @dataclass
@@ -191,7 +187,7 @@ def run_page(page: str, blocks: list[Block], tmp_path: Path) -> Run:
     bin_dir = overlay_venv(tmp_path / "venv")
     launches = tmp_path / "sitl-launches"
     launches.mkdir()
-    port = free_udp_port()
+    port = str(free_udp_port())
     adapt = Run(cwd=work, output="", launches=launches, port=port).adapt
     env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
            "ARDUCOPTER": str(sitl_binary(tmp_path)), "FAKE_SITL_LOG_DIR": str(launches), "MPLBACKEND": "Agg"}

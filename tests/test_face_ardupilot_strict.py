@@ -19,7 +19,8 @@ from preland_app.sim.params import ARDUCOPTER_PARAMS, ARDUPILOT_PARAM_NAMES, Par
 from preland_app.sim.simulator import Simulator
 
 from .conftest import THESIS_MISSION
-from .test_mavlink_face import command, free_port, position_estimate_ready, serving, wait_for
+from .ports import free_udp_port as free_port
+from .test_mavlink_face import command, position_estimate_ready, serving, wait_for
 from .waiting import until
 
 EMBEDDED_ONLY = ("PRL_LOST_HOLD", "PRL_RET_ALT", "PRL_FS_HOLD")

@@ -8,7 +8,7 @@ from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest
 from preland_app.runtime.mavlink import fly_mavlink
 
-from .test_mavlink_face import free_port
+from .ports import free_udp_port as free_port
 from .test_mavlink_runtime import PATIENCE_S, ServedSimulator, fly_paced
 from .waiting import until_async
 

@@ -2,6 +2,7 @@
 
 import asyncio
 import contextlib
+import errno
 import socket
 import threading
 import time
@@ -18,6 +19,7 @@ from preland_app.sim.params import ARDUPILOT_PARAM_NAMES
 from preland_app.sim.simulator import Simulator
 from preland_app.sim.spec import EnvironmentSpec, WindSpec
 
+from .ports import free_udp_port as free_port
 from .waiting import until
 
 # 8x: what these tests reached when they asked 10x, before the face kept to its clock; a true 10x
@@ -46,12 +48,6 @@ def held_at_ms(client, *, timeout_s: float = 10.0) -> tuple[int, object]:
             if fields is not None:
                 return fields["time_boot_ms"], sim_state
     raise AssertionError(f"no PRELAND_PACE answer within {timeout_s} s")
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @contextlib.contextmanager
@@ -343,40 +339,88 @@ def test_what_a_step_writes_leaves_in_datagrams_of_whole_frames_below_the_mtu():
     assert min(frames_per_datagram) >= 1 and max(frames_per_datagram) > 3
 
 
+class _AttitudeReader:
+    """A free face (at 1x) with one pymavlink client that asked for ATTITUDE at 10 Hz, stepped by hand."""
+
+    def __init__(self) -> None:
+        self.port = free_port()
+        self.simulator = Simulator(seed=3, environment=EnvironmentSpec(wind=WindSpec(speed_m_s=0.0,
+                                                                                     turbulence_w20_m_s=0.0)))
+        self.face = MavlinkFace(simulator=self.simulator, clock=ScaledWallClock(speedup=1.0),
+                                listen=f"udp:127.0.0.1:{self.port}")
+        self.client = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.port}", source_system=255,
+                                                 dialect="ardupilotmega")
+        self.attitudes_ms: list[int] = []
+        self.client.mav.command_long_send(1, 1, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                          mavlink2.MAVLINK_MSG_ID_ATTITUDE, 1e5, 0, 0, 0, 0, 0)
+        self.step_until_an_attitude_after(-1, "the face to stream ATTITUDE to the client that asked")
+
+    def step_until_an_attitude_after(self, time_ms: int, what: str) -> None:
+        deadline = time.monotonic() + 30.0
+        while not self.attitudes_ms or self.attitudes_ms[-1] <= time_ms:
+            assert time.monotonic() < deadline, f"waited 30 s for {what}"
+            self.face._step_and_serve()
+            while (message := self.client.recv_match(type="ATTITUDE", blocking=False)) is not None:
+                self.attitudes_ms.append(message.time_boot_ms)
+
+    def a_second_unheard(self) -> tuple[int, int]:
+        """Step one vehicle second, then speak and read on: (from, to) ms of the second stepped."""
+        from_ms = self.face.time_boot_ms()
+        for _ in range(round(1.0 / self.simulator.dt_s)):
+            self.face._step_and_serve()
+        to_ms = self.face.time_boot_ms()
+        self.client.mav.heartbeat_send(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        self.step_until_an_attitude_after(to_ms, "the face to stream again to the client that spoke")
+        return from_ms, to_ms
+
+    def close(self) -> None:
+        self.face._close()
+        self.client.close()
+
+
 def test_a_listening_port_sends_nothing_to_a_peer_gone_silent_until_it_speaks_again():
     """A companion's port, once closed, may be handed to another program, which would read this vehicle as its
     own: a peer that said nothing for PEER_SILENT_WALL_S gets no more streams, and gets them again when it
     speaks."""
-    port = free_port()
-    simulator = Simulator(seed=3, environment=EnvironmentSpec(wind=WindSpec(speed_m_s=0.0, turbulence_w20_m_s=0.0)))
-    face = MavlinkFace(simulator=simulator, clock=ScaledWallClock(speedup=1.0), listen=f"udp:127.0.0.1:{port}")
-    client = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, dialect="ardupilotmega")
-    attitudes_ms: list[int] = []
-
-    def step_until_an_attitude_after(time_ms: int, what: str) -> None:
-        deadline = time.monotonic() + 30.0
-        while not attitudes_ms or attitudes_ms[-1] <= time_ms:
-            assert time.monotonic() < deadline, f"waited 30 s for {what}"
-            face._step_and_serve()
-            while (message := client.recv_match(type="ATTITUDE", blocking=False)) is not None:
-                attitudes_ms.append(message.time_boot_ms)
-
+    reader = _AttitudeReader()
     try:
-        client.mav.command_long_send(1, 1, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                     mavlink2.MAVLINK_MSG_ID_ATTITUDE, 1e5, 0, 0, 0, 0, 0)
-        step_until_an_attitude_after(-1, "the face to stream ATTITUDE to the client that asked")
         # The peer last spoke longer ago than the bound: a second of steps sends it nothing.
-        face.channels[0].heard_wall_s -= mavlink_face.PEER_SILENT_WALL_S + 1.0
-        silent_from_ms = face.time_boot_ms()
-        for _ in range(round(1.0 / simulator.dt_s)):
-            face._step_and_serve()
-        silent_to_ms = face.time_boot_ms()
-        client.mav.heartbeat_send(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        step_until_an_attitude_after(silent_to_ms, "the face to stream again to the client that spoke")
+        reader.face.channels[0].heard_wall_s -= mavlink_face.PEER_SILENT_WALL_S + 1.0
+        silent_from_ms, silent_to_ms = reader.a_second_unheard()
     finally:
-        face._close()
-        client.close()
+        reader.close()
     assert silent_to_ms - silent_from_ms >= 990
     # Datagrams from one sender arrive in order: any sent in the silent second would be read before the later ones.
-    assert [t for t in attitudes_ms if silent_from_ms < t <= silent_to_ms] == []
-    assert attitudes_ms[-1] > silent_to_ms
+    assert [t for t in reader.attitudes_ms if silent_from_ms < t <= silent_to_ms] == []
+    assert reader.attitudes_ms[-1] > silent_to_ms
+
+
+def test_a_peer_that_lets_go_of_its_pacing_gets_nothing_more_until_it_speaks_again():
+    """A companion's PRELAND_PACE 0 says it is leaving (it closes its port next): its port gets nothing more at
+    once, not after PEER_SILENT_WALL_S, in which another program given the port would read this vehicle and
+    fly it with its own grants and commands."""
+    reader = _AttitudeReader()
+    try:
+        pace(reader.client, 0)
+        gone_from_ms, gone_to_ms = reader.a_second_unheard()
+    finally:
+        reader.close()
+    first_after = [t for t in reader.attitudes_ms if t > gone_from_ms][0]
+    assert gone_to_ms - gone_from_ms >= 990
+    # The release is read at the next step: at most one ATTITUDE (10 Hz) is sent before it.
+    assert [t for t in reader.attitudes_ms if gone_from_ms + 100 < t <= gone_to_ms] == [], first_after
+    assert reader.attitudes_ms[-1] > gone_to_ms
+
+
+def test_no_socket_can_share_a_served_port():
+    """pymavlink binds a listening port with SO_REUSEADDR, which lets any later socket with it share the port
+    (one bound to port 0 may even be given it): the face clears it once bound."""
+    reader = _AttitudeReader()
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
+            other.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            with pytest.raises(OSError) as refused:
+                other.bind(("127.0.0.1", reader.port))
+    finally:
+        reader.close()
+    assert refused.value.errno == errno.EADDRINUSE

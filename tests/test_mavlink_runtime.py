@@ -17,7 +17,7 @@ from preland_app.sim.simulator import Simulator
 from preland_app.vehicle.mavlink_backend import MavlinkVehicle
 from preland_app.vehicle.types import FlightMode
 
-from .test_mavlink_face import free_port
+from .ports import free_udp_port as free_port
 from .waiting import until, until_async
 
 SPEEDUP = 8.0

@@ -166,3 +166,42 @@ def test_an_unanswered_grant_is_reported_with_what_the_sender_knows():
 
     with pytest.raises(LinkLost, match=r"held at 1000 ms, granted 1100 ms; that grant sent 3 times"):
         run(main)
+
+
+def test_an_answer_far_past_every_grant_is_another_vehicles_and_ends_the_link():
+    # A vehicle still sending to a port its companion closed reaches the companion the system gave that port
+    # next; this companion's grants then reach it too, and it answers from its own time (here 171 s).
+    sim = Simulator()
+    sim.clock.answer_timeout_wall_s = 600.0
+    outcome = {}
+
+    async def main():
+        sim.clock.start(1.0)
+        await asyncio.sleep(0)  # the own simulator's first answer
+        await sim.clock.sleep(0.25)
+        outcome["before"] = sim.clock.now_s()
+        sim.clock.held(1.25)  # a second answer at the time already held: the same vehicle, no harm
+        asyncio.get_running_loop().call_soon(sim.clock.held, 171.0)
+        try:
+            await sim.clock.sleep(0.25)
+        except LinkLost as error:
+            outcome["error"] = str(error)
+        outcome["after"] = sim.clock.now_s()
+
+    run(main)
+    assert outcome["before"] == 1.25 and outcome["after"] == 1.25  # the other vehicle's time never counted
+    assert outcome["error"] == ("paced clock: an answer holding at 171.000 s, past the 1250 ms granted and the "
+                                "1.250 s held: another vehicle answers on this companion's port")
+
+
+def test_a_first_answer_past_the_grant_is_where_a_free_running_simulator_holds():
+    sim = Simulator()
+    sim.time_s = 40.0  # a simulator that ran free for 40 s before this companion paced it
+
+    async def main():
+        sim.clock.start(1.0)
+        await asyncio.sleep(0)
+        await sim.clock.sleep(0.5)
+
+    run(main)
+    assert sim.clock.now_s() == 40.5 and sim.grants == [1000, 40500]

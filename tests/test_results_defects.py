@@ -11,6 +11,7 @@ from preland_app.landing.paper import PaperLanding
 from preland_app.outcome import Outcome
 from preland_app.runtime.embedded import TrialRequest, run_trial
 
+from .ports import free_udp_port
 from .tools.paper_fake import paper_context_over_fake
 
 
@@ -105,15 +106,11 @@ def test_detect_refuses_an_output_it_cannot_write_as_video(tmp_path):
 
 
 def test_fault_send_to_a_port_nobody_listens_on_fails():
-    import socket
-
     from typer.testing import CliRunner
 
     from preland_app.cli import app
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:  # a free port, closed again
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    port = free_udp_port()  # a free port, closed again
     result = CliRunner().invoke(app, ["fault", "send", "--connect", f"udp://127.0.0.1:{port}", "--target", "marker",
                                       "--r-drop", "1.0", "--ack-timeout-s", "0.3"])
     assert result.exit_code == 1 and "sent" not in result.stdout
@@ -122,16 +119,13 @@ def test_fault_send_to_a_port_nobody_listens_on_fails():
 
 def test_fault_send_is_acknowledged_by_a_listener():
     import asyncio
-    import socket
 
     from typer.testing import CliRunner
 
     from preland_app.cli import app
     from preland_app.mavlink.fault_message import listen
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    port = free_udp_port()
     received = []
 
     async def main():

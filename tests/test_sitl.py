@@ -22,6 +22,7 @@ from preland_app.runtime.sitl_parm import read_parm_file
 from preland_app.vehicle.lockstep_clock import MISSION_START_S
 
 from .conftest import ROOT, THESIS_MISSION
+from .ports import free_udp_port
 from .procs import alive, children, cmdline
 from .tools.fake_sitl import FRAME_RATE_HZ
 from .tools.terminal import as_from_a_terminal
@@ -554,12 +555,9 @@ def test_a_two_worker_campaign_on_real_sitl(tmp_path):
 
 @needs_real_sitl
 def test_the_fault_command_reaches_a_sitl_flight(thesis_mission):
-    import socket
     import threading
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        fault_port = probe.getsockname()[1]
+    fault_port = free_udp_port()
     sent = threading.Event()
 
     def send_later():

@@ -129,9 +129,11 @@ host, port = sys.argv[sys.argv.index("--serial0") + 1].split(":")[1:]
     return binary
 
 
-def test_a_stopping_sitl_keeps_its_companions_port_from_other_trials(tmp_path, monkeypatch):
-    """SITL sends to the companion's port until it has exited, and the companion lets the port go first: the
-    port stays held meanwhile, so no other trial is handed it and reads this vehicle's messages as its own."""
+def test_a_sitl_keeps_its_companions_port_from_other_trials_before_the_companion_binds_and_while_stopping(
+        tmp_path, monkeypatch):
+    """SITL sends to the companion's port from its start, before the companion binds it, and until it has
+    exited, after the companion let the port go: the port stays held meanwhile, so no other trial is handed it
+    and reads this vehicle's messages as its own."""
     import asyncio
     import errno
     import socket
@@ -165,7 +167,13 @@ out.recv(16)
 
     async def main() -> tuple[int, str, str | None]:
         sitl = SitlInstance(options=SitlOptions(binary=binary, speedup=1.0), params={})
-        # The companion listens before SITL starts, as MAVSDK's port takes SITL's first datagram.
+        # Chosen, the port is held until the companion binds it: no other program can be handed it first.
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other:
+            with pytest.raises(OSError) as before_companion:
+                other.bind(("127.0.0.1", sitl.port))
+        assert before_companion.value.errno == errno.EADDRINUSE
+        # The companion listens before SITL starts here, so its port takes SITL's first datagram.
+        sitl.hand_port_to_companion()
         companion = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         companion.bind(("127.0.0.1", sitl.port))
         companion.settimeout(60)

@@ -75,7 +75,8 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
                       tlog_path: str | None = None, fault_listen: str | None = None, preflight: bool = False,
                       camera_source: str | None = None, frame_source=None, detection_log: str | None = None,
                       video_path: str | None = None, paced: bool = False, lockstep=None, sensor_truth=None,
-                      companions: Sequence[Callable[[MavlinkVehicle], Awaitable[None]]] = ()) -> TrialOutcome:
+                      companions: Sequence[Callable[[MavlinkVehicle], Awaitable[None]]] = (),
+                      before_link: Callable[[], None] | None = None) -> TrialOutcome:
     """Fly one trial over MAVLink (on an ordinary asyncio loop: the autopilot keeps time).
     `tlog_path`: write every MAVLink message received to this telemetry log. `fault_listen`: a UDP address
     where PRELAND_FAULT_INJECTION commands change the land mode's faults while it flies. `preflight`: run
@@ -87,11 +88,12 @@ async def fly_mavlink(request: TrialRequest, *, url: str, truth: bool = True, li
     at its vehicle time however slow this machine is. `lockstep` (a `LockstepClock`): the vehicle is SITL on
     a physics in this process that owns time, and this is its clock; `sensor_truth` (with `pose()` and
     `time_s()`): where the simulated sensors see the world from, instead of SIM_STATE (that physics' own
-    state, exact at each reading's time), and with `ned()` what the trajectory and the score read too."""
+    state, exact at each reading's time), and with `ned()` what the trajectory and the score read too.
+    `before_link`: called just before the link binds its port (whoever kept the port for it lets it go)."""
     mission = request.resolved_mission()
     strategy = mission.land.strategy()
     vehicle = MavlinkVehicle(url=url, want_truth=truth, link_timeout_s=link_timeout_s, tlog_path=tlog_path,
-                             paced=paced, lockstep=lockstep)
+                             paced=paced, lockstep=lockstep, before_link=before_link)
     clock = vehicle.clock
     events = EventLog(clock)
     side_tasks = [asyncio.ensure_future(companion(vehicle)) for companion in companions]

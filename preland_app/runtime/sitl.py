@@ -380,10 +380,11 @@ def _serial0_flag(binary: str, modified_ns: int) -> str:
     return "--uartA" if "--uartA" in usage and "--serial0" not in usage else "--serial0"
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
+def _held_udp_port() -> socket.socket:
+    """A socket on a free 127.0.0.1 port (the system picks it), held until the companion binds the port."""
+    held = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    held.bind(("127.0.0.1", 0))
+    return held
 
 
 def _hold_udp_port(port: int) -> socket.socket | None:
@@ -419,7 +420,10 @@ class SitlInstance:
         self.home = home
         self.heading_deg = heading_deg
         self.instance: int | None = None
-        self.port = _free_udp_port()
+        # SITL sends to the companion's port from its start, before the companion binds it: held meanwhile, the
+        # port cannot be handed to another program (another trial's companion), which would read this vehicle.
+        self._port_hold: socket.socket | None = _held_udp_port()
+        self.port = self._port_hold.getsockname()[1]
         self.process: subprocess.Popen | None = None
         self.bridge: JsonBridge | None = None
         self.relay: MavlinkRelay | None = None  # on preland's physics: between SITL and MAVSDK (sitl_relay)
@@ -500,6 +504,12 @@ class SitlInstance:
             self._release()
             raise SitlError(message)
         return self
+
+    def hand_port_to_companion(self) -> None:
+        """Let the companion's port go, for the companion to bind it at once (`MavlinkVehicle(before_link=...)`)."""
+        if self._port_hold is not None:
+            self._port_hold.close()
+            self._port_hold = None
 
     def _ended_before_answering(self) -> str:
         # Said the same whether the start check or the watch finds it: how soon a process that cannot start
@@ -583,6 +593,7 @@ class SitlInstance:
         self._release()
 
     def _release(self) -> None:
+        self.hand_port_to_companion()
         if self.bridge is not None:
             self.bridge.stop()  # joins its thread (bounded); safe to call again
         if self.relay is not None:
@@ -661,7 +672,7 @@ async def fly_sitl(request: TrialRequest, *, options: SitlOptions, tlog_name: st
         outcome = await fly_mavlink(request, url=sitl.url, truth=not on_preland_physics, tlog_path=tlog_path,
                                     fault_listen=options.fault_listen,
                                     companions=(sitl.watch, gps.run),
-                                    lockstep=lockstep,
+                                    lockstep=lockstep, before_link=sitl.hand_port_to_companion,
                                     sensor_truth=BridgeTruth(sitl.bridge) if sitl.bridge is not None else None)
     outcome.details["runtime"] = "sitl"
     outcome.details["sitl_instance"] = sitl.instance

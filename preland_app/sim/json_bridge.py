@@ -97,8 +97,9 @@ class JsonBridge:
         self.packet_timeout_s = float(packet_timeout_s)
         self._send_rangefinder = send_rangefinder
         self._battery_voltage_v = battery_voltage_v
+        # No SO_REUSEADDR: with it, Linux may give port 0 a port another such socket holds (a served vehicle's),
+        # and the two would share its datagrams.
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self._sock.bind((host, port))
         if sys.platform == "linux":
             # A blocking socket whose receive gives up after _POLL_S: one system call a packet each way (a

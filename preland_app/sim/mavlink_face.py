@@ -8,8 +8,10 @@ and keeps its own stream rates, so preland can fly on one port while a ground
 station watches on another. Like ArduPilot it streams nothing but HEARTBEAT
 until asked (MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM) on that
 channel; STATUSTEXT and changed parameters go to every channel. Unlike ArduPilot, a
-listening port stops sending to a peer silent for PEER_SILENT_WALL_S (its port may
-have been handed to another program) until it speaks again. It handles COMMAND_LONG
+listening port stops sending to a peer silent for PEER_SILENT_WALL_S, or one that
+has let go of its pacing (PRELAND_PACE 0: it is leaving), until it speaks again:
+its port, once closed, may be handed to another program, which would read this
+vehicle and, answering, fly it. It handles COMMAND_LONG
 (arm/disarm, take-off, land, RTL, set mode, message intervals, message
 requests), SET_MODE, SET_POSITION_TARGET_LOCAL_NED (positions and velocities,
 local and body frames), SET_POSITION_TARGET_GLOBAL_INT, LANDING_TARGET, the
@@ -26,7 +28,9 @@ as a float fails as it would on ArduPilot; an integer parameter set keeps what
 AP_Param::set_float keeps; parameters ArduPilot lacks are neither served nor
 accepted; a read or set of an unknown name gets no answer; SYS_STATUS reports
 sensors as ArduCopter does with no fence; and a UDP port another process
-already holds is refused rather than silently shared.
+already holds is refused rather than silently shared, as is, once served, the
+face's own port (pymavlink binds it with SO_REUSEADDR, which the face then
+clears, so no later socket can share it).
 
 What one step writes to a port leaves in one datagram (several if it passes
 MAX_DATAGRAM_BYTES, split between frames), as a telemetry radio or
@@ -190,6 +194,11 @@ class _Channel:
                                                          source_component=1, dialect="ardupilotmega")
         except OSError as error:
             raise MavlinkFaceError(f"--listen {listen!r}: {error.strerror or error}") from None
+        if address.startswith("udpin:"):
+            # Linux lets any later socket with SO_REUSEADDR share the port while this one has it set, even
+            # one bound to port 0 (the system then may pick this port): that socket would take the datagrams
+            # meant for this vehicle.
+            self.connection.port.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 0)
         self.mav = self.connection.mav
         self.datagrams = _Datagrams(self.connection)
         self.mav.file = self.datagrams  # pymavlink's sender writes its frames here
@@ -701,6 +710,8 @@ class MavlinkFace(GroundStationServices):
         if fields["time_boot_ms"] == 0:
             if self._channel is self._pace_channel:
                 self._release_pace()
+            # The companion is leaving: its port gets nothing more until it speaks again.
+            self._channel.peer_seen = self._channel.sends_first
             return
         self.pace_until_s = fields["time_boot_ms"] / 1000.0
         self._pace_channel = self._channel

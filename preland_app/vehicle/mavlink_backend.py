@@ -104,14 +104,16 @@ class MavlinkVehicle:
     serial:///dev/ttyAMA0:921600), for ArduPilot Copter. `paced`: the vehicle is preland's simulator and
     runs in lock-step with this companion (PRELAND_PACE, see `paced_clock`); its clock is then a
     `PacedClock`, and the ground truth comes with each held time. `lockstep`: the vehicle is SITL on a
-    physics in this process that owns time, and this is its clock (`lockstep_clock`)."""
+    physics in this process that owns time, and this is its clock (`lockstep_clock`). `before_link`: called
+    just before MAVSDK opens the connection (binds its port), so whoever kept the port for it lets it go."""
 
     def __init__(self, *, url: str, connect_timeout_s: float = 30.0, link_timeout_s: float = 5.0,
                  want_truth: bool = False, tlog_path: str | None = None, paced: bool = False,
-                 lockstep: LockstepClock | None = None) -> None:
+                 lockstep: LockstepClock | None = None, before_link: Callable[[], None] | None = None) -> None:
         if paced and lockstep is not None:
             raise ValueError("a vehicle is paced (PRELAND_PACE) or in lock-step with a local physics, not both")
         self.url = url
+        self._before_link = before_link
         self.tlog = TlogWriter(tlog_path) if tlog_path else None
         self.connect_timeout_s = connect_timeout_s
         self.link_timeout_s = link_timeout_s
@@ -192,6 +194,8 @@ class MavlinkVehicle:
     async def _link_up(self) -> None:
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 
+        if self._before_link is not None:
+            self._before_link()
         try:
             await self._sdk.add_any_connection(mavsdk_connection_url(self.url))
         except Exception as error:

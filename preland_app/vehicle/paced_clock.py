@@ -38,6 +38,11 @@ from .after_ready import AfterReady
 PACE_ANSWER_WALL_S = 20.0
 # A deadline is reached when the held time is within this of it (time_boot_ms is whole milliseconds).
 _REACHED_S = 0.0005
+# Once the simulator holds for this companion it steps to a grant and stops there (a physics step past it at
+# most). An answer further past everything granted is another vehicle's: one whose datagrams reach this
+# companion's port (a vehicle still sending to the port of a companion that closed it, which the system then
+# handed to this one), and to which this companion's grants and commands then go too.
+FOREIGN_ANSWER_S = 0.5
 
 
 class PacedClock:
@@ -79,6 +84,13 @@ class PacedClock:
         reached."""
         self._answered_wall_s = time.monotonic()
         self.answers += 1
+        if self._started and self.answers > 1 and \
+                time_s > max(self._granted_ms / 1000, self._now_s) + FOREIGN_ANSWER_S:
+            # The first answer may be past the grant: a simulator running free holds where the grant finds it.
+            self.fail(operation="paced clock", reason=f"an answer holding at {time_s:.3f} s, past the "
+                                                      f"{self._granted_ms} ms granted and the {self._now_s:.3f} s "
+                                                      "held: another vehicle answers on this companion's port")
+            return
         if time_s <= self._now_s:
             return
         self._now_s = time_s
