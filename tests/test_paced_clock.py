@@ -199,6 +199,7 @@ def test_a_first_answer_past_the_grant_is_where_a_free_running_simulator_holds()
     sim.time_s = 40.0  # a simulator that ran free for 40 s before this companion paced it
 
     async def main():
+        sim.clock.held(0.5)  # an answer read before this companion started pacing (to whoever paced before)
         sim.clock.start(1.0)
         await asyncio.sleep(0)
         await sim.clock.sleep(0.5)
