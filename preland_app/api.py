@@ -166,7 +166,8 @@ def run_campaign(campaign: CampaignSpec | str | os.PathLike, *, db: str | os.Pat
     `executor="local"` (default): each trial in a worker process on this machine (`workers`, default one
     per core; a plugin land mode's module must be importable there: on sys.path or PYTHONPATH). With more
     than one worker the workers import the script that runs the campaign: its top-level code goes under
-    `if __name__ == "__main__":`.
+    `if __name__ == "__main__":` (without it, or when the script fails to import, no worker can start and
+    the campaign stops with an ExecutorError that says so, storing no trial).
     `executor="ray"`: each trial a task of a Ray cluster (`trial_cpus` CPUs each): the one at `ray_address`
     (`auto`, `ray://host:10001`), else $RAY_ADDRESS, else the one this process already joined, else a local
     Ray instance of `workers` CPUs that is stopped again at the end; the store stays on this machine (a

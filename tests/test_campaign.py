@@ -240,6 +240,32 @@ def test_a_pool_forks_its_workers_from_a_server_with_the_campaigns_environment_o
     assert seen == [("first", True, True, True), ("second", True, True, True)]
 
 
+
+def test_a_script_without_a_main_guard_stops_with_why_and_records_no_trial(tmp_path):
+    """With more than one worker, each worker imports the script that runs the campaign: one without
+    `if __name__ == "__main__":` runs the campaign again as each worker starts. The campaign stops saying so,
+    and no trial is stored as an error (before, every trial was, as a worker that died, after tracebacks
+    saying that another driver held the campaign)."""
+    campaign = write_campaign(tmp_path, QUICK)
+    db = tmp_path / "runs.db"
+    script = tmp_path / "unguarded.py"
+    script.write_text("from preland_app.api import run_campaign\n"
+                      f"run_campaign({str(campaign)!r}, db={str(db)!r}, workers=2)\n"
+                      "print('after the campaign')\n")
+    ran = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert ran.returncode == 1 and "after the campaign" not in ran.stdout, ran.stderr[-3000:]
+    last = ran.stderr.strip().splitlines()[-1]
+    assert last == ("preland_app.campaign.executors.base.ExecutorError: no campaign worker could start (their "
+                    f"errors are printed above): each imports {script}, which must import without errors, and "
+                    'its top-level code must be under `if __name__ == "__main__":`'), ran.stderr[-3000:]
+    # Each worker's own error names what it did.
+    assert (f"ExecutorError: run_campaign was called while a campaign worker imported {script}: with more than "
+            "one worker, each worker imports the script that runs the campaign") in ran.stderr
+    assert "another driver" not in ran.stderr
+    with ResultsStore(db) as store:
+        assert store.trials("quick") == []
+
+
 BAD = {
     "unknown mission": ("name: x\nmission: nowhere.yaml\nscenarios: [{label: a, land: normal}]\n", "mission",
                         "unknown mission"),

@@ -18,6 +18,7 @@ from ..errors import PrelandError
 from ..runtime.base import Runtime
 from ..runtime.embedded import EmbeddedRuntime
 from .executors import ExecutorOptions, TrialExecutor, create_executor
+from .executors.local import refuse_while_a_worker_starts
 from .lease import HEARTBEAT_PERIOD_S, DriverLease
 from .spec import CampaignSpec, resolve_scenarios, spec_hash
 from .store import DuplicateTrial, ResultsStore, StoreError, TrialRecord
@@ -45,6 +46,7 @@ def run_campaign(campaign: CampaignSpec, store: ResultsStore, *, workers: int | 
     (a registered name, `options` for it, or an executor object), storing each as it finishes; with
     `outcomes_only`, without event logs and trajectories. `workers` is `options.workers` when no options are
     given. Returns (trials run now, trials in the campaign)."""
+    refuse_while_a_worker_starts("run_campaign")
     if isinstance(executor, str):
         executor = create_executor(executor, options or ExecutorOptions(workers=workers))
     scenarios = resolve_scenarios(campaign)

@@ -23,6 +23,7 @@ import multiprocessing
 import os
 import select
 import signal
+import sys
 import threading
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -39,11 +40,32 @@ from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, Exec
 FORK_SERVER_PRELOAD = ("__main__", "preland_app.campaign.trials", "cv2")
 
 
-def _worker_init(campaign_pid: int, environment: dict[str, str] | None = None) -> None:
+def refuse_while_a_worker_starts(operation: str) -> None:
+    """Raise ExecutorError when called while this process starts as a campaign worker and imports the script
+    that runs the campaign (multiprocessing's `_inheriting`, as its own check of a missing main guard reads):
+    that script's top-level code runs again in every worker."""
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        # Imported as `__mp_main__` in the worker.
+        raise ExecutorError(f"{operation} was called while a campaign worker imported "
+                            f"{_script(sys.modules.get('__mp_main__'))}: with more than one worker, each worker "
+                            f"imports the script that runs the campaign, so {MAIN_GUARD}")
+
+
+def _script(module) -> str:
+    path = getattr(module, "__file__", None)
+    return path if path else "the script that runs the campaign"
+
+
+MAIN_GUARD = "its top-level code must be under `if __name__ == \"__main__\":`"
+
+
+def _worker_init(campaign_pid: int, environment: dict[str, str] | None = None, started=None) -> None:
     """Workers die with the campaign process (a killed campaign leaves no orphans) and ignore Ctrl-C
     (the campaign process handles it). OpenCV runs on the worker's own thread: the pool already has a
     process per core, and OpenCV's thread pool on top would make them compete. `environment`: the
-    campaign process's, when its pool started (the fork server holds the one it was started with)."""
+    campaign process's, when its pool started (the fork server holds the one it was started with).
+    `started` (an Event of the pool's): set once the worker is ready, which a worker that fails while it
+    imports the campaign's script never is."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
@@ -73,6 +95,8 @@ def _worker_init(campaign_pid: int, environment: dict[str, str] | None = None) -
     import cv2
 
     cv2.setNumThreads(1)
+    if started is not None:
+        started.set()
 
 
 def _exit_when_readable(pidfd: int) -> None:
@@ -105,6 +129,7 @@ class LocalExecutor(TrialExecutor):
         self._inline: deque[TrialJob] = deque()
         self._deaths: dict[tuple[str, int], int] = {}
         self._opencv_threads: int | None = None
+        self._worker_started = None  # the pool's Event: a worker of it got ready
 
     def start(self) -> None:
         if self.workers > 1:
@@ -119,8 +144,10 @@ class LocalExecutor(TrialExecutor):
             cv2.setNumThreads(1)
 
     def _new_pool(self) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(max_workers=self.workers, mp_context=_pool_context(),
-                                   initializer=_worker_init, initargs=(os.getpid(), dict(os.environ)))
+        context = _pool_context()
+        self._worker_started = context.Event()
+        return ProcessPoolExecutor(max_workers=self.workers, mp_context=context, initializer=_worker_init,
+                                   initargs=(os.getpid(), dict(os.environ), self._worker_started))
 
     def slots(self) -> int:
         return self.workers
@@ -152,7 +179,16 @@ class LocalExecutor(TrialExecutor):
         return records
 
     def _replace_broken_pool(self) -> list[TrialRecord]:
-        """A worker died (killed, out of memory): run every trial then in flight again in a new pool."""
+        """A worker died (killed, out of memory): run every trial then in flight again in a new pool. When no
+        worker of the pool ever got ready, none can start (the script that runs the campaign fails as the
+        workers import it): the campaign stops, its trials are not recorded as errors."""
+        if not self._worker_started.is_set():
+            self._in_flight.clear()
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+            raise ExecutorError(f"no campaign worker could start (their errors are printed above): each imports "
+                                f"{_script(sys.modules.get('__main__'))}, which must import without errors, and "
+                                f"{MAIN_GUARD}")
         records, again = [], []
         for future, job in self._in_flight.items():
             if future.done() and not future.cancelled() and future.exception() is None:
