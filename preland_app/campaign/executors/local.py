@@ -11,7 +11,9 @@ killed: each watches the driver's process (a pidfd), and asks for SIGKILL when i
 parent ends (PR_SET_PDEATHSIG). The fork server ends once the driver and every
 worker have. Elsewhere (no fork server, no /proc) workers are spawned. A worker that dies
 breaks the whole pool: every trial then in flight is run again in a new pool,
-and one that was in flight at two such deaths is recorded as an error. With one
+and one that was in flight at two such deaths is recorded as an error. A pool
+none of whose workers got ready (the script that runs the campaign, which each
+worker imports, fails there) stops the campaign instead, recording nothing. With one
 worker, trials run in the driver's own process, one per `completed` call, with
 OpenCV on one thread as in a pool's worker: one worker is one core.
 """
@@ -38,6 +40,8 @@ from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, Exec
 # What a worker imports to fly a trial, imported once by the fork server instead of by every worker; with
 # `__main__`, the driver's main script (a worker imports it to unpickle what it defines, as a spawned one does).
 FORK_SERVER_PRELOAD = ("__main__", "preland_app.campaign.trials", "cv2")
+# What a script that runs a campaign on more than one worker needs, since each worker imports it.
+MAIN_GUARD = "its top-level code must be under `if __name__ == \"__main__\":`"
 
 
 def refuse_while_a_worker_starts(operation: str) -> None:
@@ -54,9 +58,6 @@ def refuse_while_a_worker_starts(operation: str) -> None:
 def _script(module) -> str:
     path = getattr(module, "__file__", None)
     return path if path else "the script that runs the campaign"
-
-
-MAIN_GUARD = "its top-level code must be under `if __name__ == \"__main__\":`"
 
 
 def _worker_init(campaign_pid: int, environment: dict[str, str] | None = None, started=None) -> None:
