@@ -37,9 +37,10 @@ from ..trials import TrialJob, error_record, run_job
 from .base import WORKER_DEATH_RETRIES, WORKER_DIED_MESSAGE, ExecutorError, ExecutorOptions, TrialExecutor
 
 
-# What a worker imports to fly a trial, imported once by the fork server instead of by every worker; with
-# `__main__`, the driver's main script (a worker imports it to unpickle what it defines, as a spawned one does).
-FORK_SERVER_PRELOAD = ("__main__", "preland_app.campaign.trials", "cv2")
+# What a worker imports to fly a trial, imported once by the fork server instead of by every worker. Not the
+# driver's main script: each worker imports that itself as it starts (to unpickle what it defines, as a
+# spawned worker does), and its top-level code must not run in the server.
+FORK_SERVER_PRELOAD = ("preland_app.campaign.trials", "cv2")
 # What a script that runs a campaign on more than one worker needs, since each worker imports it.
 MAIN_GUARD = "its top-level code must be under `if __name__ == \"__main__\":`"
 
