@@ -380,16 +380,9 @@ def _serial0_flag(binary: str, modified_ns: int) -> str:
     return "--uartA" if "--uartA" in usage and "--serial0" not in usage else "--serial0"
 
 
-def _held_udp_port() -> socket.socket:
-    """A socket on a free 127.0.0.1 port (the system picks it), held until the companion binds the port."""
-    held = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    held.bind(("127.0.0.1", 0))
-    return held
-
-
 def _hold_udp_port(port: int) -> socket.socket | None:
-    """Bind 127.0.0.1:`port` (no SO_REUSEADDR, so nothing can share it) and return the socket, or None when
-    the port is still taken (the companion's MAVLink has not let it go)."""
+    """Bind 127.0.0.1:`port` (0: a free one the system picks; no SO_REUSEADDR, so nothing can share it) and
+    return the socket, or None when the port is taken (the companion's MAVLink has not let it go)."""
     sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         sink.bind(("127.0.0.1", port))
@@ -422,7 +415,9 @@ class SitlInstance:
         self.instance: int | None = None
         # SITL sends to the companion's port from its start, before the companion binds it: held meanwhile, the
         # port cannot be handed to another program (another trial's companion), which would read this vehicle.
-        self._port_hold: socket.socket | None = _held_udp_port()
+        self._port_hold = _hold_udp_port(0)
+        if self._port_hold is None:
+            raise SitlError("no free UDP port on 127.0.0.1 for the companion")
         self.port = self._port_hold.getsockname()[1]
         self.process: subprocess.Popen | None = None
         self.bridge: JsonBridge | None = None
