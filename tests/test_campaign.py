@@ -258,10 +258,14 @@ def test_a_script_without_a_main_guard_stops_with_why_and_records_no_trial(tmp_p
     assert last == ("preland_app.campaign.executors.base.ExecutorError: no campaign worker could start (their "
                     f"errors are printed above): each imports {script}, which must import without errors, and "
                     'its top-level code must be under `if __name__ == "__main__":`'), ran.stderr[-3000:]
-    # Each worker's own error names what it did.
-    assert (f"ExecutorError: run_campaign was called while a campaign worker imported {script}: with more than "
-            "one worker, each worker imports the script that runs the campaign") in ran.stderr
-    assert "another driver" not in ran.stderr
+    # Each worker that got as far as the script says what it did, in one line of its own and no traceback
+    # (two tracebacks printed at once interleave). At least one did: the pool broke when the first one ended.
+    worker_line = (f"preland: run_campaign was called while a campaign worker imported {script}: with more than "
+                   "one worker, each worker imports the script that runs the campaign, so its top-level code must "
+                   'be under `if __name__ == "__main__":`')
+    lines = ran.stderr.splitlines()
+    assert 1 <= lines.count(worker_line) <= 2, ran.stderr
+    assert "forkserver.py" not in ran.stderr and "another driver" not in ran.stderr, ran.stderr
     with ResultsStore(db) as store:
         assert store.trials("quick") == []
 

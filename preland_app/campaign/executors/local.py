@@ -46,14 +46,18 @@ MAIN_GUARD = "its top-level code must be under `if __name__ == \"__main__\":`"
 
 
 def refuse_while_a_worker_starts(operation: str) -> None:
-    """Raise ExecutorError when called while this process starts as a campaign worker and imports the script
-    that runs the campaign (multiprocessing's `_inheriting`, as its own check of a missing main guard reads):
-    that script's top-level code runs again in every worker."""
+    """End this process (exit status 1) with one line on stderr saying why, when called while it starts as a
+    campaign worker and imports the script that runs the campaign (multiprocessing's `_inheriting`, as its
+    own check of a missing main guard reads): that script's top-level code runs again in every worker. One
+    line, written at once, not a traceback: the pool's workers fail together, and a traceback is printed a
+    piece at a time, so theirs interleave into lines that none of them wrote."""
     if getattr(multiprocessing.current_process(), "_inheriting", False):
         # Imported as `__mp_main__` in the worker.
-        raise ExecutorError(f"{operation} was called while a campaign worker imported "
-                            f"{_script(sys.modules.get('__mp_main__'))}: with more than one worker, each worker "
-                            f"imports the script that runs the campaign, so {MAIN_GUARD}")
+        sys.stderr.write(f"preland: {operation} was called while a campaign worker imported "
+                         f"{_script(sys.modules.get('__mp_main__'))}: with more than one worker, each worker "
+                         f"imports the script that runs the campaign, so {MAIN_GUARD}\n")
+        sys.stderr.flush()
+        raise SystemExit(1)
 
 
 def _script(module) -> str:
