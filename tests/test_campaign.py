@@ -240,7 +240,6 @@ def test_a_pool_forks_its_workers_from_a_server_with_the_campaigns_environment_o
     assert seen == [("first", True, True, True), ("second", True, True, True)]
 
 
-
 def test_a_script_without_a_main_guard_stops_with_why_and_records_no_trial(tmp_path):
     """With more than one worker, each worker imports the script that runs the campaign: one without
     `if __name__ == "__main__":` runs the campaign again as each worker starts. The campaign stops saying so,

@@ -151,8 +151,6 @@ def sitl_binary(folder: Path) -> Path:
     return wrapper
 
 
-
-
 @dataclass
 class Run:
     cwd: Path
